@@ -1,0 +1,88 @@
+"""The one place that builds bus keys (SPEC §2). Every key starts with the mission prefix."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+DEFAULT_PREFIX = "spacemap"
+ROLES = ("router", "sim", "edge", "agent", "monitor")
+
+
+@dataclass(frozen=True)
+class Keys:
+    prefix: str = DEFAULT_PREFIX
+
+    def __post_init__(self) -> None:
+        if not self.prefix or any(c in self.prefix for c in "*$?#") or self.prefix.endswith("/"):
+            raise ValueError(f"invalid key prefix {self.prefix!r}")
+
+    def _k(self, *parts: object) -> str:
+        return "/".join((self.prefix, *map(str, parts)))
+
+    def clock(self) -> str:
+        return self._k("sim", "clock")
+
+    def rgbd(self, robot: int | str) -> str:
+        return self._k("robot", robot, "rgbd")
+
+    def odom(self, robot: int | str) -> str:
+        return self._k("robot", robot, "odom")
+
+    def cmd_vel(self, robot: int | str) -> str:
+        return self._k("robot", robot, "cmd_vel")
+
+    def pose(self, robot: int | str) -> str:
+        return self._k("robot", robot, "pose")
+
+    def submap(self, robot: int | str) -> str:
+        return self._k("robot", robot, "submap")
+
+    def correction(self, robot: int | str) -> str:
+        return self._k("robot", robot, "correction")
+
+    def goal(self, robot: int | str) -> str:
+        return self._k("robot", robot, "goal")
+
+    def goal_status(self, robot: int | str) -> str:
+        return self._k("robot", robot, "goal_status")
+
+    def map_grid(self) -> str:
+        return self._k("map", "grid")
+
+    def map_frontiers(self) -> str:
+        return self._k("map", "frontiers")
+
+    def map_cloud(self) -> str:
+        return self._k("map", "cloud")
+
+    def edge_ack(self) -> str:
+        return self._k("edge", "ack")
+
+    def gt_pose(self, robot: int | str) -> str:
+        return self._k("eval", "robot", robot, "gt_pose")
+
+    def any_robot(self, topic: str) -> str:
+        """Wildcard over every robot's `topic` (e.g. "pose")."""
+        return self._k("robot", "*", topic)
+
+    def alive_all(self) -> str:
+        return self._k("alive", "**")
+
+    def alive(self, role: str, ident: int | str = 0) -> str:
+        if role not in ROLES:
+            raise ValueError(f"unknown role {role!r}")
+        return self._k("alive", role, ident)
+
+    def robot_id(self, key: str) -> int:
+        """The robot id in a `.../robot/{id}/...` key; ValueError when there is none."""
+        parts = key.split("/")
+        try:
+            return int(parts[parts.index("robot") + 1])
+        except (ValueError, IndexError) as exc:
+            raise ValueError(f"no robot id in key {key!r}") from exc
+
+    def alive_member(self, key: str) -> tuple[str, str]:
+        """(role, id) of an `alive/{role}/{id}` key."""
+        parts = key.split("/")
+        i = parts.index("alive")
+        return parts[i + 1], parts[i + 2]

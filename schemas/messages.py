@@ -1,0 +1,278 @@
+"""Every message on the bus (SPEC §2), as frozen pydantic models.
+
+Conventions: poses named `T_to_from` are 4×4 float64 homogeneous transforms; planar poses are
+`Pose2D` (metres, radians, yaw about +z); times are `stamp_ns` (sim time, integer ns) and
+`tick` (the lockstep tick the data belongs to). Frames: `world` = global frame of the mission,
+`base` = robot base on the floor, `cam` = optical camera frame (x right, y down, z forward),
+`submap` = the keyframe a submap's points are expressed in.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, ClassVar, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from schemas.arrays import ArraySpec
+
+SCHEMA_VERSION = 1
+
+RobotId = Annotated[int, Field(ge=0, le=255)]
+Tick = Annotated[int, Field(ge=0)]
+StampNs = Annotated[int, Field(ge=0)]
+
+
+class Model(BaseModel):
+    model_config = ConfigDict(
+        frozen=True, extra="forbid", allow_inf_nan=False, arbitrary_types_allowed=True
+    )
+
+
+class Message(Model):
+    """Base of every bus message: `kind` names the model, `v` its schema version."""
+
+    KIND: ClassVar[str] = ""
+    v: Literal[1] = SCHEMA_VERSION
+
+
+class Pose2D(Model):
+    """Planar pose: position (m) and yaw (rad, about +z) of `base` in the named frame."""
+
+    x: float
+    y: float
+    yaw: float
+
+
+class Clock(Message):
+    """Sim clock; published once per tick before that tick's sensor data."""
+
+    KIND: ClassVar[str] = "clock"
+    kind: Literal["clock"] = "clock"
+    tick: Tick
+    stamp_ns: StampNs
+    dt_ns: Annotated[int, Field(gt=0)]
+    lockstep: bool
+    camera_tick: bool = Field(description="True when this tick carries RGB-D frames")
+
+
+class RgbdFrame(Message):
+    """One RGB-D frame of robot `robot_id`'s camera."""
+
+    KIND: ClassVar[str] = "rgbd"
+    kind: Literal["rgbd"] = "rgbd"
+    robot_id: RobotId
+    tick: Tick
+    stamp_ns: StampNs
+    depth_m: Annotated[np.ndarray, ArraySpec("float32", (None, None), compress=True)] = Field(
+        description="(H, W) float32 z-depth along the optical axis in metres; 0 = no return"
+    )
+    rgb: Annotated[np.ndarray, ArraySpec("uint8", (None, None, 3), compress=True)] = Field(
+        description="(H, W, 3) uint8 colour image, row 0 at the top"
+    )
+    K: Annotated[np.ndarray, ArraySpec("float64", (3, 3))] = Field(
+        description="(3, 3) pinhole intrinsics of the optical frame, pixels"
+    )
+    T_base_cam: Annotated[np.ndarray, ArraySpec("float64", (4, 4))] = Field(
+        description="(4, 4) extrinsics: optical camera frame → robot base frame"
+    )
+    range_max_m: Annotated[float, Field(gt=0)]
+
+
+class Odometry(Message):
+    """Wheel odometry (drifting) of robot `robot_id`, in its odometry frame (= spawn pose)."""
+
+    KIND: ClassVar[str] = "odom"
+    kind: Literal["odom"] = "odom"
+    robot_id: RobotId
+    tick: Tick
+    stamp_ns: StampNs
+    pose_odom: Pose2D
+    v_mps: float
+    omega_radps: float
+
+
+class CmdVel(Message):
+    """Velocity command; `tick` is the tick it answers (lockstep handshake)."""
+
+    KIND: ClassVar[str] = "cmd_vel"
+    kind: Literal["cmd_vel"] = "cmd_vel"
+    robot_id: RobotId
+    tick: Tick
+    v_mps: float
+    omega_radps: float
+
+
+class RobotPose(Message):
+    """An agent's estimate of its own pose in the world frame."""
+
+    KIND: ClassVar[str] = "pose"
+    kind: Literal["pose"] = "pose"
+    robot_id: RobotId
+    tick: Tick
+    stamp_ns: StampNs
+    pose_world: Pose2D
+    state: str = Field(default="", max_length=32, description="navigation state, for display")
+
+
+class Submap(Message):
+    """A keyframe submap, or a delta of it: the voxels added since the last message.
+
+    Points are in the `submap` frame, quantized to int16 millimetres, stored column-wise.
+    """
+
+    KIND: ClassVar[str] = "submap"
+    kind: Literal["submap"] = "submap"
+    robot_id: RobotId
+    submap_id: Annotated[int, Field(ge=0)]
+    seq: Annotated[int, Field(ge=0)] = Field(description="per-robot message counter, no gaps")
+    tick: Tick
+    stamp_ns: StampNs
+    T_world_submap: Annotated[np.ndarray, ArraySpec("float64", (4, 4))] = Field(
+        description="(4, 4) the agent's estimate of the submap frame in the world frame"
+    )
+    points_mm: Annotated[np.ndarray, ArraySpec("int16", (3, None), compress=True)] = Field(
+        description="(3, N) int16 voxel-centre coordinates in the submap frame, millimetres"
+    )
+    colors: Annotated[np.ndarray, ArraySpec("uint8", (None, 3), compress=True)] = Field(
+        description="(N, 3) uint8 RGB per point"
+    )
+    counts: Annotated[np.ndarray, ArraySpec("uint16", (None,), compress=True)] = Field(
+        description="(N,) observations per voxel so far"
+    )
+    free_cells: Annotated[np.ndarray, ArraySpec("int16", (2, None), compress=True)] = Field(
+        description="(2, M) int16 floor cells seen free, in submap-frame grid cells (x, y)"
+    )
+    cell_m: Annotated[float, Field(gt=0)] = Field(description="size of a free cell, metres")
+
+
+class Correction(Message):
+    """Corrected submap poses from the edge's pose graph."""
+
+    KIND: ClassVar[str] = "correction"
+    kind: Literal["correction"] = "correction"
+    robot_id: RobotId
+    tick: Tick
+    submap_ids: Annotated[np.ndarray, ArraySpec("int32", (None,))]
+    T_world_submap: Annotated[np.ndarray, ArraySpec("float64", (None, 4, 4))] = Field(
+        description="(N, 4, 4) corrected poses, one per submap id"
+    )
+
+
+FrontierClass = Literal["unexplored", "weak"]
+
+
+class Goal(Message):
+    """An assigned exploration goal: the translated frontier f′ on the merged grid."""
+
+    KIND: ClassVar[str] = "goal"
+    kind: Literal["goal"] = "goal"
+    robot_id: RobotId
+    tick: Tick
+    goal_id: Annotated[int, Field(ge=0)]
+    x: float
+    y: float
+    frontier_class: FrontierClass
+    revenue: float
+
+
+GoalState = Literal["active", "reached", "invalid", "unreachable"]
+
+
+class GoalStatus(Message):
+    """The agent's report on its current goal."""
+
+    KIND: ClassVar[str] = "goal_status"
+    kind: Literal["goal_status"] = "goal_status"
+    robot_id: RobotId
+    tick: Tick
+    goal_id: Annotated[int, Field(ge=0)]
+    status: GoalState
+    reason: str = Field(default="", max_length=200)
+
+
+class OccupancyGrid(Message):
+    """The merged 2D grid: -1 unknown, 0 free, 100 occupied (ROS convention)."""
+
+    KIND: ClassVar[str] = "grid"
+    kind: Literal["grid"] = "grid"
+    tick: Tick
+    resolution_m: Annotated[float, Field(gt=0)]
+    origin_x: float = Field(description="world x of cell (row 0, col 0)'s outer corner, m")
+    origin_y: float
+    cells: Annotated[np.ndarray, ArraySpec("int8", (None, None), compress=True)] = Field(
+        description="(H, W) int8, row = y index, col = x index"
+    )
+
+
+class Frontier(Model):
+    """One frontier region and its translated goal f′."""
+
+    frontier_id: Annotated[int, Field(ge=0)]
+    frontier_class: FrontierClass
+    centroid: tuple[float, float, float]
+    goal_xy: tuple[float, float]
+    size: Annotated[int, Field(ge=1)]
+    gain: float
+    importance: float
+
+
+class Frontiers(Message):
+    """Current frontier regions; `complete` is the edge's exploration-complete verdict."""
+
+    KIND: ClassVar[str] = "frontiers"
+    kind: Literal["frontiers"] = "frontiers"
+    tick: Tick
+    frontiers: list[Frontier]
+    complete: bool
+    assigned: dict[int, int] = Field(default_factory=dict, description="robot id → frontier id")
+
+
+class EdgeAck(Message):
+    """The edge's answer to a planning tick (lockstep handshake); spacemap's addition to §2."""
+
+    KIND: ClassVar[str] = "edge_ack"
+    kind: Literal["edge_ack"] = "edge_ack"
+    tick: Tick
+
+
+class CloudRequest(Message):
+    """Query body of `map/cloud`; an empty query payload means the same."""
+
+    KIND: ClassVar[str] = "cloud_request"
+    kind: Literal["cloud_request"] = "cloud_request"
+    per_robot: bool = False
+
+
+class Cloud(Message):
+    """The merged cloud P* (or one robot's part of it), in the world frame."""
+
+    KIND: ClassVar[str] = "cloud"
+    kind: Literal["cloud"] = "cloud"
+    tick: Tick
+    robot_id: int = Field(default=-1, description="-1 for the merged map")
+    points_world: Annotated[np.ndarray, ArraySpec("float32", (None, 3), compress=True)]
+    colors: Annotated[np.ndarray, ArraySpec("uint8", (None, 3), compress=True)]
+    robot_ids: Annotated[np.ndarray, ArraySpec("uint8", (None,), compress=True)] = Field(
+        description="(N,) robot id of each point's first observer"
+    )
+
+
+class GtPose(Message):
+    """Ground-truth pose, for the evaluator only."""
+
+    KIND: ClassVar[str] = "gt_pose"
+    kind: Literal["gt_pose"] = "gt_pose"
+    robot_id: RobotId
+    tick: Tick
+    stamp_ns: StampNs
+    pose_world: Pose2D
+
+
+MESSAGE_TYPES: dict[str, type[Message]] = {
+    cls.KIND: cls
+    for cls in (
+        Clock, RgbdFrame, Odometry, CmdVel, RobotPose, Submap, Correction, Goal, GoalStatus,
+        OccupancyGrid, Frontiers, EdgeAck, CloudRequest, Cloud, GtPose,
+    )
+}

@@ -1,0 +1,224 @@
+"""The zenoh shell shared by every service: session flags, one ordered inbox, safe decoding.
+
+Every subscriber pushes raw samples into one FIFO inbox; the service's main loop drains it in
+arrival order, so its state depends only on message order (the lockstep determinism argument
+in ARCHITECTURE.md). Decoding validates; a bad message is logged once per (key, reason),
+counted, and dropped.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import queue
+import threading
+from collections import Counter
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Literal
+
+import zenoh
+from pydantic import BaseModel, ConfigDict, Field
+
+from schemas import DecodeError, Keys, decode, encode
+from schemas.arrays import DEFAULT_MAX_ARRAY_BYTES
+from schemas.messages import Message
+
+log = logging.getLogger(__name__)
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+
+
+class BusConfig(BaseModel):
+    """How a process joins the bus."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    prefix: str = "spacemap"
+    connect: str = Field(default=DEFAULT_ENDPOINT, description="router endpoint to connect to")
+    shared_memory: bool = Field(default=False, description="zenoh SHM; never needed")
+    max_array_bytes: int = Field(default=DEFAULT_MAX_ARRAY_BYTES, gt=0)
+    connect_timeout_s: float = Field(default=30.0, gt=0)
+
+
+def zenoh_config(
+    mode: Literal["client", "peer", "router"],
+    connect: list[str] | None = None,
+    listen: list[str] | None = None,
+    shared_memory: bool = False,
+    connect_timeout_s: float = 30.0,
+) -> zenoh.Config:
+    """The one set of session flags every spacemap process uses."""
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps(mode))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("scouting/gossip/enabled", "false")
+    conf.insert_json5("transport/shared_memory/enabled", json.dumps(shared_memory))
+    if connect:
+        conf.insert_json5("connect/endpoints", json.dumps(connect))
+        conf.insert_json5("connect/timeout_ms", json.dumps(int(connect_timeout_s * 1000)))
+        conf.insert_json5("connect/exit_on_failure", "true")
+    if listen is not None:
+        conf.insert_json5("listen/endpoints", json.dumps(listen))
+    return conf
+
+
+@contextmanager
+def open_session(config: BusConfig) -> Iterator[zenoh.Session]:
+    """A client session connected to the router of `config`."""
+    session = zenoh.open(
+        zenoh_config(
+            "client",
+            connect=[config.connect],
+            shared_memory=config.shared_memory,
+            connect_timeout_s=config.connect_timeout_s,
+        )
+    )
+    try:
+        yield session
+    finally:
+        session.close()
+
+
+@dataclass(frozen=True)
+class Inbound:
+    """One decoded message from the inbox."""
+
+    key: str
+    message: Message
+
+
+@dataclass(frozen=True)
+class Presence:
+    """A liveliness change: `alive` False means the process is gone."""
+
+    role: str
+    ident: str
+    alive: bool
+
+
+class Bus:
+    """A service's view of the bus: publish, subscribe into one inbox, liveliness, queries."""
+
+    def __init__(self, session: zenoh.Session, config: BusConfig) -> None:
+        self.session = session
+        self.config = config
+        self.keys = Keys(config.prefix)
+        self.inbox: queue.Queue[tuple[str, str, bytes | bool, type[Message] | None]] = (
+            queue.Queue()
+        )
+        self.dropped: Counter[str] = Counter()
+        self.bytes_out: Counter[str] = Counter()
+        self._logged: set[tuple[str, str]] = set()
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._handles: list[object] = []
+        self._lock = threading.Lock()
+
+    # -- inbound ---------------------------------------------------------------------------
+    def subscribe(self, key_expr: str, model: type[Message]) -> None:
+        def on_sample(sample: zenoh.Sample) -> None:
+            self.inbox.put(("msg", str(sample.key_expr), sample.payload.to_bytes(), model))
+
+        self._handles.append(self.session.declare_subscriber(key_expr, on_sample))
+
+    def watch_liveliness(self) -> None:
+        """Push a Presence for every current and future `alive/**` token."""
+
+        def on_token(sample: zenoh.Sample) -> None:
+            alive = sample.kind == zenoh.SampleKind.PUT
+            self.inbox.put(("alive", str(sample.key_expr), alive, None))
+
+        self._handles.append(
+            self.session.liveliness().declare_subscriber(
+                self.keys.alive_all(), on_token, history=True
+            )
+        )
+
+    def declare_alive(self, role: str, ident: int | str = 0) -> None:
+        self._handles.append(self.session.liveliness().declare_token(self.keys.alive(role, ident)))
+
+    def poll(self, timeout: float | None = None) -> Inbound | Presence | None:
+        """Next valid inbound item, or None when `timeout` passes with nothing valid."""
+        try:
+            tag, key, payload, model = self.inbox.get(timeout=timeout)
+        except queue.Empty:
+            return None
+        if tag == "alive":
+            role, ident = self.keys.alive_member(key)
+            return Presence(role, ident, bool(payload))
+        assert isinstance(payload, bytes) and model is not None
+        try:
+            return Inbound(key, decode(payload, model, self.config.max_array_bytes))
+        except DecodeError as exc:
+            self.reject(key, exc)
+            return None
+
+    def drain(self) -> Iterator[Inbound | Presence]:
+        """Every item already in the inbox, in order, without waiting."""
+        while not self.inbox.empty():
+            item = self.poll(timeout=0)
+            if item is not None:
+                yield item
+
+    def reject(self, key: str, error: DecodeError) -> None:
+        self.dropped[error.reason] += 1
+        if (key, error.reason) not in self._logged:
+            self._logged.add((key, error.reason))
+            log.warning("dropped message on %s: %s", key, error)
+
+    # -- outbound --------------------------------------------------------------------------
+    def publish(self, key: str, message: Message) -> int:
+        """Encode and publish reliably (congestion control BLOCK); returns payload bytes."""
+        payload = encode(message)
+        with self._lock:
+            pub = self._publishers.get(key)
+            if pub is None:
+                pub = self.session.declare_publisher(
+                    key,
+                    congestion_control=zenoh.CongestionControl.BLOCK,
+                    reliability=zenoh.Reliability.RELIABLE,
+                )
+                self._publishers[key] = pub
+            pub.put(payload)
+            self.bytes_out[key] += len(payload)
+        return len(payload)
+
+    def serve(self, key: str, answer: Callable[[bytes], Message]) -> None:
+        """A queryable at `key`; `answer` gets the query payload and returns the reply."""
+
+        def on_query(query: zenoh.Query) -> None:
+            body = query.payload.to_bytes() if query.payload is not None else b""
+            try:
+                query.reply(key, encode(answer(body)))
+            except DecodeError as exc:
+                self.reject(key, exc)
+                query.reply_err(str(exc).encode())
+
+        self._handles.append(self.session.declare_queryable(key, on_query))
+
+    def query(self, key: str, request: Message | None, model: type[Message], timeout: float) -> Message:
+        """One reply to a `get`, decoded and validated; TimeoutError when none comes."""
+        payload = encode(request) if request is not None else None
+        for reply in self.session.get(key, payload=payload, timeout=timeout):
+            if reply.ok is not None:
+                return decode(reply.ok.payload.to_bytes(), model, self.config.max_array_bytes)
+        raise TimeoutError(f"no reply on {key} within {timeout} s")
+
+    def close(self) -> None:
+        for handle in reversed(self._handles):
+            undeclare = getattr(handle, "undeclare", None)
+            if undeclare is not None:
+                undeclare()
+        self._handles.clear()
+
+
+@contextmanager
+def connect(config: BusConfig) -> Iterator[Bus]:
+    """Open a session to the router and wrap it in a Bus."""
+    with open_session(config) as session:
+        bus = Bus(session, config)
+        try:
+            yield bus
+        finally:
+            bus.close()

@@ -1,0 +1,33 @@
+"""Simulator section of the mission config."""
+
+from __future__ import annotations
+
+import math
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class SimConfig(BaseModel):
+    """World, robots, sensors and clock."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    world: str = Field(default="house", description="registered world name or MJCF path")
+    robots: int = Field(default=3, ge=1, le=64)
+    seed: int = 0
+    spawn: list[tuple[float, float, float]] | None = Field(
+        default=None, description="(x m, y m, yaw rad) per robot; None = the world's defaults"
+    )
+    tick_s: float = Field(default=0.1, gt=0, description="control period = one lockstep tick")
+    camera_every_ticks: int = Field(default=2, ge=1)
+    edge_every_ticks: int = Field(default=10, ge=1, description="edge planning period, ticks")
+    width: int = Field(default=160, ge=16, le=640)
+    height: int = Field(default=120, ge=12, le=480)
+    hfov_deg: float = Field(default=84.1, gt=0, lt=180)
+    range_m: float = Field(default=5.0, gt=0)
+    camera_height_m: float = Field(default=0.35, gt=0)
+    max_v_mps: float = Field(default=0.5, gt=0)
+    max_omega_radps: float = Field(default=math.pi / 4, gt=0)
+    realtime: float | None = Field(default=None, gt=0, description="None = lockstep")
+    max_sim_time_s: float = Field(default=600.0, gt=0)
+    wait_for_peers_s: float = Field(default=120.0, gt=0)
