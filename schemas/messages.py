@@ -80,7 +80,11 @@ class RgbdFrame(Message):
 
 
 class Odometry(Message):
-    """Wheel odometry (drifting) of robot `robot_id`, in its odometry frame (= spawn pose)."""
+    """Wheel odometry (drifting) of robot `robot_id`.
+
+    The odometry frame is the world frame at spawn: robots start from known initial poses
+    (the paper's problem setting), so `pose_odom` equals the true pose at tick 0 and then drifts.
+    """
 
     KIND: ClassVar[str] = "odom"
     kind: Literal["odom"] = "odom"
