@@ -58,7 +58,8 @@ class ArraySpec:
             raise self._fail(f"dtype {array.dtype.name} not in {self.allowed}")
         if self.shape is not None:
             ok = array.ndim == len(self.shape) and all(
-                want is None or want == got for want, got in zip(self.shape, array.shape, strict=True)
+                want is None or want == got
+                for want, got in zip(self.shape, array.shape, strict=True)
             )
             if not ok:
                 raise self._fail(f"shape {array.shape} does not match {self.shape}")

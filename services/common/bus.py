@@ -105,9 +105,7 @@ class Bus:
         self.session = session
         self.config = config
         self.keys = Keys(config.prefix)
-        self.inbox: queue.Queue[tuple[str, str, bytes | bool, type[Message] | None]] = (
-            queue.Queue()
-        )
+        self.inbox: queue.Queue[tuple[str, str, bytes | bool, type[Message] | None]] = queue.Queue()
         self.dropped: Counter[str] = Counter()
         self.bytes_out: Counter[str] = Counter()
         self._logged: set[tuple[str, str]] = set()
@@ -119,6 +117,14 @@ class Bus:
     def subscribe(self, key_expr: str, model: type[Message]) -> None:
         def on_sample(sample: zenoh.Sample) -> None:
             self.inbox.put(("msg", str(sample.key_expr), sample.payload.to_bytes(), model))
+
+        self._handles.append(self.session.declare_subscriber(key_expr, on_sample))
+
+    def tap(self, key_expr: str, on_bytes: Callable[[str, int], None]) -> None:
+        """Count payload sizes on `key_expr` without decoding (runs on a zenoh thread)."""
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            on_bytes(str(sample.key_expr), len(sample.payload.to_bytes()))
 
         self._handles.append(self.session.declare_subscriber(key_expr, on_sample))
 
@@ -197,7 +203,9 @@ class Bus:
 
         self._handles.append(self.session.declare_queryable(key, on_query))
 
-    def query(self, key: str, request: Message | None, model: type[Message], timeout: float) -> Message:
+    def query(
+        self, key: str, request: Message | None, model: type[Message], timeout: float
+    ) -> Message:
         """One reply to a `get`, decoded and validated; TimeoutError when none comes."""
         payload = encode(request) if request is not None else None
         for reply in self.session.get(key, payload=payload, timeout=timeout):

@@ -1,0 +1,131 @@
+"""Grid path planning: obstacle inflation, 8-connected A* and Dijkstra distance fields.
+
+Moves are 8-connected; a diagonal costs √2 cells. A diagonal move may not cut the corner of a
+blocked cell (both side neighbours must be traversable), so paths stay executable.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+
+import numpy as np
+from scipy import ndimage
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
+
+SQRT2 = math.sqrt(2.0)
+_MOVES = [(-1, 0, 1.0), (1, 0, 1.0), (0, -1, 1.0), (0, 1, 1.0),
+          (-1, -1, SQRT2), (-1, 1, SQRT2), (1, -1, SQRT2), (1, 1, SQRT2)]
+
+
+def disk(radius_cells: int) -> np.ndarray:
+    """Boolean disk structuring element of the given radius in cells."""
+    r = int(radius_cells)
+    yy, xx = np.mgrid[-r : r + 1, -r : r + 1]
+    return xx * xx + yy * yy <= r * r
+
+
+def inflate(occupied: np.ndarray, radius_cells: int) -> np.ndarray:
+    """Occupied cells grown by a disk of `radius_cells` (the robot's radius)."""
+    occupied = np.asarray(occupied, dtype=bool)
+    if radius_cells <= 0 or not occupied.any():
+        return occupied.copy()
+    return ndimage.binary_dilation(occupied, structure=disk(radius_cells))
+
+
+def _edges(traversable: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sources, targets and costs of every allowed move between traversable cells."""
+    H, W = traversable.shape
+    idx = np.arange(H * W).reshape(H, W)
+    src, dst, cost = [], [], []
+    for dr, dc, c in _MOVES:
+        r0, r1 = max(0, -dr), H - max(0, dr)
+        c0, c1 = max(0, -dc), W - max(0, dc)
+        ok = traversable[r0:r1, c0:c1] & traversable[r0 + dr : r1 + dr, c0 + dc : c1 + dc]
+        if dr and dc:  # no corner cutting
+            ok &= traversable[r0 + dr : r1 + dr, c0:c1] & traversable[r0:r1, c0 + dc : c1 + dc]
+        src.append(idx[r0:r1, c0:c1][ok])
+        dst.append(idx[r0 + dr : r1 + dr, c0 + dc : c1 + dc][ok])
+        cost.append(np.full(int(ok.sum()), c))
+    return np.concatenate(src), np.concatenate(dst), np.concatenate(cost)
+
+
+def distance_field(traversable: np.ndarray, start_rc: tuple[int, int]) -> np.ndarray:
+    """Path length in cells from `start_rc` to every cell; inf where unreachable."""
+    traversable = np.asarray(traversable, dtype=bool)
+    H, W = traversable.shape
+    r, c = start_rc
+    out = np.full((H, W), np.inf)
+    if not (0 <= r < H and 0 <= c < W) or not traversable[r, c]:
+        return out
+    src, dst, cost = _edges(traversable)
+    graph = csr_matrix((cost, (src, dst)), shape=(H * W, H * W))
+    return dijkstra(graph, indices=r * W + c).reshape(H, W)
+
+
+def astar(
+    traversable: np.ndarray, start_rc: tuple[int, int], goal_rc: tuple[int, int]
+) -> np.ndarray | None:
+    """Shortest 8-connected path as (K, 2) int64 (row, col) including both ends, or None."""
+    grid = np.asarray(traversable, dtype=bool)
+    H, W = grid.shape
+    start, goal = (int(start_rc[0]), int(start_rc[1])), (int(goal_rc[0]), int(goal_rc[1]))
+    for r, c in (start, goal):
+        if not (0 <= r < H and 0 <= c < W) or not grid[r, c]:
+            return None
+    g = {start: 0.0}
+    parent: dict[tuple[int, int], tuple[int, int]] = {}
+    heap = [(_octile(start, goal), 0.0, start)]
+    closed: set[tuple[int, int]] = set()
+    while heap:
+        _, cost, node = heapq.heappop(heap)
+        if node == goal:
+            return _walk_back(parent, goal)
+        if node in closed:
+            continue
+        closed.add(node)
+        r, c = node
+        for dr, dc, step in _MOVES:
+            nr, nc = r + dr, c + dc
+            if not (0 <= nr < H and 0 <= nc < W) or not grid[nr, nc]:
+                continue
+            if dr and dc and not (grid[nr, c] and grid[r, nc]):
+                continue
+            new = cost + step
+            if new < g.get((nr, nc), math.inf):
+                g[(nr, nc)] = new
+                parent[(nr, nc)] = node
+                heapq.heappush(heap, (new + _octile((nr, nc), goal), new, (nr, nc)))
+    return None
+
+
+def _octile(a: tuple[int, int], b: tuple[int, int]) -> float:
+    dr, dc = abs(a[0] - b[0]), abs(a[1] - b[1])
+    return (SQRT2 - 1.0) * min(dr, dc) + max(dr, dc)
+
+
+def _walk_back(parent: dict[tuple[int, int], tuple[int, int]], goal: tuple[int, int]) -> np.ndarray:
+    path = [goal]
+    while path[-1] in parent:
+        path.append(parent[path[-1]])
+    return np.array(path[::-1], dtype=np.int64)
+
+
+def path_length(path_rc: np.ndarray) -> float:
+    """Length in cells of a (K, 2) cell path."""
+    if len(path_rc) < 2:
+        return 0.0
+    steps = np.abs(np.diff(path_rc, axis=0))
+    return float(np.sum(np.where(steps.sum(axis=1) == 2, SQRT2, 1.0)))
+
+
+def nearest_traversable(traversable: np.ndarray, rc: tuple[int, int]) -> tuple[int, int] | None:
+    """The traversable cell closest (Euclidean) to `rc`, or None if there is none."""
+    grid = np.asarray(traversable, dtype=bool)
+    cells = np.argwhere(grid)
+    if cells.size == 0:
+        return None
+    d2 = ((cells - np.asarray(rc)) ** 2).sum(axis=1)
+    r, c = cells[int(np.argmin(d2))]
+    return int(r), int(c)

@@ -1,0 +1,125 @@
+"""The launcher's view of a running mission: clock, map, frontiers, robots, traffic, truth.
+
+The monitor is the evaluator's listener; it is the only process besides the simulator that
+reads `eval/` keys, and no service reads what it collects.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import Counter
+from dataclasses import dataclass, field
+
+from schemas import messages as m
+from services.common.bus import Bus, Inbound, Presence
+
+
+@dataclass
+class RobotTrack:
+    """What the monitor knows of one robot."""
+
+    gt_stamps_ns: list[int] = field(default_factory=list)
+    gt_xyyaw: list[tuple[float, float, float]] = field(default_factory=list)
+    est_stamps_ns: list[int] = field(default_factory=list)
+    est_xyyaw: list[tuple[float, float, float]] = field(default_factory=list)
+    state: str = ""
+    goals_assigned: int = 0
+    goals_reached: int = 0
+    goal_statuses: Counter[str] = field(default_factory=Counter)
+
+
+@dataclass
+class Snapshot:
+    """One row of the run's time series."""
+
+    sim_time_s: float
+    known_cells: int
+    frontiers: int
+
+
+class Monitor:
+    """Subscribes to everything a run report needs; call `pump()` from the main loop."""
+
+    def __init__(self, bus: Bus, robots: int) -> None:
+        self.bus = bus
+        self.robots = robots
+        self.tracks = {i: RobotTrack() for i in range(robots)}
+        self.clock: m.Clock | None = None
+        self.grid: m.OccupancyGrid | None = None
+        self.frontiers: m.Frontiers | None = None
+        self.alive: set[tuple[str, str]] = set()
+        self.ever_alive: set[tuple[str, str]] = set()
+        self.series: list[Snapshot] = []
+        self._bytes: Counter[int] = Counter()
+        self._bytes_lock = threading.Lock()
+        keys = bus.keys
+        bus.subscribe(keys.clock(), m.Clock)
+        bus.subscribe(keys.map_grid(), m.OccupancyGrid)
+        bus.subscribe(keys.map_frontiers(), m.Frontiers)
+        bus.subscribe(keys.any_robot("pose"), m.RobotPose)
+        bus.subscribe(keys.any_robot("goal"), m.Goal)
+        bus.subscribe(keys.any_robot("goal_status"), m.GoalStatus)
+        bus.subscribe(keys.gt_pose("*"), m.GtPose)
+        for topic in ("pose", "submap", "cmd_vel", "goal_status"):
+            bus.tap(keys.any_robot(topic), self._count)
+        bus.watch_liveliness()
+        bus.declare_alive("monitor", 0)
+
+    def _count(self, key: str, nbytes: int) -> None:
+        robot = self.bus.keys.robot_id(key)
+        with self._bytes_lock:
+            self._bytes[robot] += nbytes
+
+    def bytes_per_robot(self) -> dict[int, int]:
+        with self._bytes_lock:
+            return {i: int(self._bytes.get(i, 0)) for i in range(self.robots)}
+
+    @property
+    def sim_time_s(self) -> float:
+        return self.clock.stamp_ns * 1e-9 if self.clock else 0.0
+
+    def pump(self, timeout: float) -> None:
+        """Handle whatever arrives within `timeout` seconds (at least one poll)."""
+        item = self.bus.poll(timeout)
+        while item is not None:
+            self._handle(item)
+            item = self.bus.poll(0) if not self.bus.inbox.empty() else None
+
+    def _handle(self, item: Inbound | Presence) -> None:
+        if isinstance(item, Presence):
+            member = (item.role, item.ident)
+            if item.alive:
+                self.alive.add(member)
+                self.ever_alive.add(member)
+            else:
+                self.alive.discard(member)
+            return
+        msg = item.message
+        if isinstance(msg, m.Clock):
+            self.clock = msg
+        elif isinstance(msg, m.OccupancyGrid):
+            self.grid = msg
+            self._snapshot()
+        elif isinstance(msg, m.Frontiers):
+            self.frontiers = msg
+        elif isinstance(msg, m.GtPose) and msg.robot_id in self.tracks:
+            t = self.tracks[msg.robot_id]
+            t.gt_stamps_ns.append(msg.stamp_ns)
+            t.gt_xyyaw.append((msg.pose_world.x, msg.pose_world.y, msg.pose_world.yaw))
+        elif isinstance(msg, m.RobotPose) and msg.robot_id in self.tracks:
+            t = self.tracks[msg.robot_id]
+            t.est_stamps_ns.append(msg.stamp_ns)
+            t.est_xyyaw.append((msg.pose_world.x, msg.pose_world.y, msg.pose_world.yaw))
+            t.state = msg.state
+        elif isinstance(msg, m.Goal) and msg.robot_id in self.tracks:
+            self.tracks[msg.robot_id].goals_assigned += 1
+        elif isinstance(msg, m.GoalStatus) and msg.robot_id in self.tracks:
+            t = self.tracks[msg.robot_id]
+            t.goal_statuses[msg.status] += 1
+            t.goals_reached += msg.status == "reached"
+
+    def _snapshot(self) -> None:
+        assert self.grid is not None
+        known = int((self.grid.cells >= 0).sum())
+        n_frontiers = len(self.frontiers.frontiers) if self.frontiers else 0
+        self.series.append(Snapshot(self.sim_time_s, known, n_frontiers))

@@ -1,0 +1,77 @@
+"""Files of a run folder: point clouds (PLY), grids (ROS map_server PGM + YAML), TUM poses."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import open3d as o3d
+import yaml
+
+from schemas import messages as m
+
+
+def write_ply(path: Path, points_world: np.ndarray, colors: np.ndarray | None = None) -> None:
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_world.astype(np.float64)))
+    if colors is not None and len(colors):
+        cloud.colors = o3d.utility.Vector3dVector(colors.astype(np.float64) / 255.0)
+    if not o3d.io.write_point_cloud(str(path), cloud, write_ascii=False):
+        raise OSError(f"could not write {path}")
+
+
+def write_grid(stem: Path, grid: m.OccupancyGrid) -> None:
+    """`stem`.pgm + `stem`.yaml in ROS map_server format (row 0 of the image = top = max y)."""
+    cells = grid.cells
+    image = np.full(cells.shape, 205, dtype=np.uint8)
+    image[cells == 0] = 254
+    image[cells >= 50] = 0
+    image = image[::-1]
+    header = f"P5\n{image.shape[1]} {image.shape[0]}\n255\n".encode()
+    stem.with_suffix(".pgm").write_bytes(header + image.tobytes())
+    meta = {
+        "image": stem.with_suffix(".pgm").name,
+        "resolution": float(grid.resolution_m),
+        "origin": [float(grid.origin_x), float(grid.origin_y), 0.0],
+        "negate": 0,
+        "occupied_thresh": 0.65,
+        "free_thresh": 0.196,
+    }
+    stem.with_suffix(".yaml").write_text(yaml.safe_dump(meta, sort_keys=False))
+
+
+def read_grid(stem: Path) -> m.OccupancyGrid:
+    """Inverse of `write_grid`."""
+    meta = yaml.safe_load(stem.with_suffix(".yaml").read_text())
+    raw = stem.with_suffix(".pgm").read_bytes()
+    parts = raw.split(maxsplit=4)
+    width, height = int(parts[1]), int(parts[2])
+    image = np.frombuffer(parts[4][: width * height], dtype=np.uint8).reshape(height, width)[::-1]
+    cells = np.full(image.shape, -1, dtype=np.int8)
+    cells[image == 254] = 0
+    cells[image == 0] = 100
+    ox, oy = meta["origin"][:2]
+    return m.OccupancyGrid(tick=0, resolution_m=meta["resolution"], origin_x=ox, origin_y=oy,
+                           cells=cells)
+
+
+def write_tum(path: Path, stamps_ns: list[int], xyyaw: list[tuple[float, float, float]]) -> None:
+    """TUM trajectory: `t x y z qx qy qz qw` per line (planar: rotation about z)."""
+    lines = []
+    for stamp, (x, y, yaw) in zip(stamps_ns, xyyaw, strict=True):
+        qz, qw = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
+        lines.append(f"{stamp * 1e-9:.9f} {x:.6f} {y:.6f} 0.0 0.0 0.0 {qz:.9f} {qw:.9f}")
+    path.write_text("\n".join(lines) + ("\n" if lines else ""))
+
+
+def read_tum(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(stamps_s (T,), xyyaw (T, 3)) from a TUM file written by `write_tum`."""
+    rows = np.loadtxt(path, ndmin=2) if path.stat().st_size else np.zeros((0, 8))
+    yaw = 2.0 * np.arctan2(rows[:, 6], rows[:, 7])
+    return rows[:, 0], np.stack([rows[:, 1], rows[:, 2], yaw], axis=1)
+
+
+def write_json(path: Path, data: dict[str, Any]) -> None:
+    path.write_text(json.dumps(data, indent=2, sort_keys=False) + "\n")

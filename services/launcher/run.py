@@ -1,0 +1,126 @@
+"""`spacemap run`: a whole mission as separate OS processes, to completion, into a run folder."""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+from services.common.bus import connect
+from services.common.config import SpacemapConfig, load_config, write_config
+from services.launcher.monitor import Monitor
+from services.launcher.report import write_run_folder
+from services.processes import ProcessGroup, free_tcp_port, spacemap_command
+
+log = logging.getLogger(__name__)
+
+
+class MissionError(RuntimeError):
+    """A mission that could not run to its end (a service died or stalled)."""
+
+
+@dataclass(frozen=True)
+class RunResult:
+    out_dir: Path
+    metrics: dict[str, object]
+    exit_codes: dict[str, int]
+
+
+def _with_endpoint(config: SpacemapConfig, endpoint: str) -> SpacemapConfig:
+    tree = config.model_dump(mode="json")
+    tree["bus"]["connect"] = endpoint
+    return SpacemapConfig.model_validate(tree)
+
+
+def start_services(group: ProcessGroup, config_path: Path, robots: int) -> None:
+    """Edge, agents, then the simulator (which waits for the others' liveliness)."""
+    cfg = ["--config", str(config_path)]
+    group.start("edge", spacemap_command("edge", *cfg))
+    for robot in range(robots):
+        group.start(f"agent{robot}", spacemap_command("agent", "--robot", str(robot), *cfg))
+    group.start("sim", spacemap_command("sim", *cfg))
+
+
+def run_mission(
+    config: SpacemapConfig,
+    out_dir: Path,
+    router_endpoint: str | None = None,
+    stall_timeout_s: float = 120.0,
+    console: Console | None = None,
+) -> RunResult:
+    """Start router (unless given), edge, agents and simulator; run; write the run folder."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    group = ProcessGroup(out_dir / "logs")
+    wall_start = time.monotonic()
+    try:
+        if router_endpoint is None:
+            router_endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+            group.start("router", spacemap_command("router", "--listen", router_endpoint))
+        config = _with_endpoint(config, router_endpoint)
+        write_config(config, out_dir / "config.yaml")
+        with connect(config.bus) as bus:
+            monitor = Monitor(bus, config.sim.robots)
+            start_services(group, out_dir / "config.yaml", config.sim.robots)
+            completed = _watch(monitor, group, config, stall_timeout_s, console)
+            wall_s = time.monotonic() - wall_start
+            metrics = write_run_folder(out_dir, config, monitor, completed, wall_s)
+    finally:
+        codes = group.stop(order=["sim", "edge"])
+    return RunResult(out_dir, metrics, codes)
+
+
+def _watch(
+    monitor: Monitor, group: ProcessGroup, config: SpacemapConfig, stall_timeout_s: float,
+    console: Console | None,
+) -> bool:
+    """Until exploration completes (True) or the sim-time cap is reached (False)."""
+    cap_s = config.sim.max_sim_time_s
+    last_tick, last_change = -1, time.monotonic()
+    console = console or Console(stderr=True)
+    columns = (
+        TextColumn("[bold]sim {task.completed:6.1f}/{task.total:.0f} s"),
+        BarColumn(),
+        TimeElapsedColumn(),
+        TextColumn("{task.fields[status]}"),
+    )
+    next_log = time.monotonic()
+    with Progress(*columns, console=console, disable=not console.is_terminal) as bar:
+        task = bar.add_task("mission", total=cap_s, status="starting")
+        while True:
+            monitor.pump(timeout=0.2)
+            dead = {n: c for n, c in group.dead().items() if n != "router" or c != 0}
+            if dead:
+                raise MissionError(f"service(s) exited: {dead}; see {group.log_dir}")
+            tick = monitor.clock.tick if monitor.clock else -1
+            now = time.monotonic()
+            if tick != last_tick:
+                last_tick, last_change = tick, now
+            elif now - last_change > stall_timeout_s:
+                raise MissionError(f"no clock tick for {stall_timeout_s:.0f} s (at tick {tick})")
+            status = _status_line(monitor)
+            bar.update(task, completed=min(monitor.sim_time_s, cap_s), status=status)
+            if not console.is_terminal and now >= next_log:
+                log.info("sim %.1f/%.0f s  %s", monitor.sim_time_s, cap_s, status)
+                next_log = now + 5.0
+            if monitor.frontiers is not None and monitor.frontiers.complete:
+                return True
+            if monitor.sim_time_s >= cap_s - 0.5 * config.sim.tick_s:
+                return False
+
+
+def _status_line(monitor: Monitor) -> str:
+    known = monitor.series[-1].known_cells if monitor.series else 0
+    area = known * (monitor.grid.resolution_m**2 if monitor.grid else 0.0)
+    frontiers = len(monitor.frontiers.frontiers) if monitor.frontiers else 0
+    states = " ".join(f"r{i}:{t.state or '-'}" for i, t in monitor.tracks.items())
+    return f"known {area:6.1f} m²  frontiers {frontiers:3d}  {states}"
+
+
+def config_from_options(
+    config_path: Path | None, overrides: dict[str, object]
+) -> SpacemapConfig:
+    return load_config(config_path, overrides)

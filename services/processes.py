@@ -1,0 +1,88 @@
+"""Child processes of a mission: start each service as its own OS process, stop them all.
+
+Children get PR_SET_PDEATHSIG so they die with the launcher even if it is SIGKILLed, and
+they are stopped with SIGTERM, then SIGKILL after a grace period: no orphans.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import logging
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+log = logging.getLogger(__name__)
+
+_PR_SET_PDEATHSIG = 1
+RUN_TAG_ENV = "SPACEMAP_RUN_LOGS"  # marks every child of a run, so leftovers can be found
+
+
+def _die_with_parent() -> None:
+    # Not on Linux: the launcher's own cleanup still runs.
+    with contextlib.suppress(OSError):
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+def free_tcp_port() -> int:
+    """A currently free TCP port on loopback."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def spacemap_command(*args: str) -> list[str]:
+    """Command line that runs a `spacemap` subcommand with this interpreter."""
+    return [sys.executable, "-m", "services", *args]
+
+
+@dataclass
+class ProcessGroup:
+    """The mission's child processes, each logging to its own file."""
+
+    log_dir: Path
+    children: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
+
+    def start(self, name: str, argv: list[str], env: dict[str, str] | None = None) -> None:
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        out = open(self.log_dir / f"{name}.log", "wb")  # noqa: SIM115 - owned by the child
+        child_env = {
+            **os.environ,
+            "OPENBLAS_NUM_THREADS": "1",
+            RUN_TAG_ENV: str(self.log_dir.resolve()),
+            **(env or {}),
+        }
+        self.children[name] = subprocess.Popen(
+            argv, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+            env=child_env, preexec_fn=_die_with_parent,
+        )
+        out.close()
+        log.debug("started %s (pid %d): %s", name, self.children[name].pid, " ".join(argv))
+
+    def dead(self) -> dict[str, int]:
+        """Children that have exited, with their exit codes."""
+        return {n: p.returncode for n, p in self.children.items() if p.poll() is not None}
+
+    def stop(self, grace_s: float = 10.0, order: list[str] | None = None) -> dict[str, int]:
+        """SIGTERM every child (in `order` first), SIGKILL what is left after `grace_s`."""
+        names = (order or []) + [n for n in self.children if n not in (order or [])]
+        for name in names:
+            proc = self.children.get(name)
+            if proc is not None and proc.poll() is None:
+                proc.send_signal(signal.SIGTERM)
+        deadline = time.monotonic() + grace_s
+        for name in names:
+            proc = self.children[name]
+            try:
+                proc.wait(timeout=max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                log.warning("%s ignored SIGTERM; killing it", name)
+                proc.kill()
+                proc.wait()
+        return {n: int(p.returncode) for n, p in self.children.items()}
