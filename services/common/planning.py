@@ -51,17 +51,29 @@ def _edges(traversable: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return np.concatenate(src), np.concatenate(dst), np.concatenate(cost)
 
 
-def distance_field(traversable: np.ndarray, start_rc: tuple[int, int]) -> np.ndarray:
-    """Path length in cells from `start_rc` to every cell; inf where unreachable."""
+def distance_fields(traversable: np.ndarray, starts_rc: list[tuple[int, int]]) -> np.ndarray:
+    """(K, H, W) path lengths in cells from each start; inf where unreachable.
+
+    The graph is built once for all starts (building it costs more than the searches).
+    """
     traversable = np.asarray(traversable, dtype=bool)
     H, W = traversable.shape
-    r, c = start_rc
-    out = np.full((H, W), np.inf)
-    if not (0 <= r < H and 0 <= c < W) or not traversable[r, c]:
+    out = np.full((len(starts_rc), H, W), np.inf)
+    valid = [
+        k for k, (r, c) in enumerate(starts_rc) if 0 <= r < H and 0 <= c < W and traversable[r, c]
+    ]
+    if not valid:
         return out
     src, dst, cost = _edges(traversable)
     graph = csr_matrix((cost, (src, dst)), shape=(H * W, H * W))
-    return dijkstra(graph, indices=r * W + c).reshape(H, W)
+    indices = [starts_rc[k][0] * W + starts_rc[k][1] for k in valid]
+    out[valid] = dijkstra(graph, indices=indices).reshape(len(valid), H, W)
+    return out
+
+
+def distance_field(traversable: np.ndarray, start_rc: tuple[int, int]) -> np.ndarray:
+    """Path length in cells from `start_rc` to every cell; inf where unreachable."""
+    return distance_fields(traversable, [start_rc])[0]
 
 
 def astar(

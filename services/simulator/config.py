@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -31,3 +32,15 @@ class SimConfig(BaseModel):
     realtime: float | None = Field(default=None, gt=0, description="None = lockstep")
     max_sim_time_s: float = Field(default=600.0, gt=0)
     wait_for_peers_s: float = Field(default=120.0, gt=0)
+    # Sensor and odometry models (spacemap additions).
+    depth_noise_per_m2: float = Field(
+        default=0.0, ge=0, description="depth noise std = this × depth², metres"
+    )
+    render_backend: Literal["auto", "gl", "raycast"] = Field(
+        default="auto", description="auto = offscreen GL, ray casting when no GL context"
+    )
+    odom_scale_error: float = Field(default=0.02, description="relative distance error")
+    odom_yaw_scale_error: float = Field(default=0.01, description="relative turn error")
+    odom_heading_bias_rad_per_m: float = Field(default=0.005, description="yaw drift per metre")
+    odom_noise_m_per_sqrt_m: float = Field(default=0.0, ge=0)
+    odom_noise_rad_per_sqrt_rad: float = Field(default=0.0, ge=0)

@@ -1,0 +1,103 @@
+"""Frontier detection on the merged 2D grid (first version; Alg. 1's 3D frontiers come later).
+
+Frontier cells are free cells 8-adjacent to unknown cells. They are clustered with 8-connected
+labelling, clusters under `frontier_min_cells` are dropped, and each cluster is translated to a
+goal f′: take the cluster cell nearest to its centroid (the anchor; the centroid of a curved
+cluster may lie off it) and the allowed goal cell nearest to that anchor. A cluster whose f′
+would lie more than `goal_max_offset_m` from its anchor is unreachable and dropped. All steps
+are whole-array operations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from services.common.grid import GridSpec
+from services.edge_server.config import EdgeConfig
+
+EIGHT = np.ones((3, 3), bool)
+
+
+@dataclass(frozen=True)
+class FrontierSet:
+    """Kept frontier clusters, index i ↔ cluster label i + 1 in `labels`."""
+
+    labels: np.ndarray  # (H, W) int32: 1 + cluster index on its frontier cells, 0 elsewhere
+    sizes: np.ndarray  # (F,) int64 cells per cluster
+    centroid_xy: np.ndarray  # (F, 2) world
+    anchor_rc: np.ndarray  # (F, 2) frontier cell nearest the centroid
+    anchor_xy: np.ndarray  # (F, 2) world centre of the anchor cell
+    goal_rc: np.ndarray  # (F, 2) translated goal f′ cell
+    goal_xy: np.ndarray  # (F, 2) world centre of the goal cell
+    dropped_unreachable: int = 0
+
+    def __len__(self) -> int:
+        return int(self.sizes.size)
+
+
+def empty_frontiers(shape: tuple[int, int]) -> FrontierSet:
+    z2 = np.zeros((0, 2))
+    return FrontierSet(np.zeros(shape, np.int32), np.zeros(0, np.int64), z2,
+                       z2.astype(np.int64), z2, z2.astype(np.int64), z2)
+
+
+def frontier_cells(free: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """(H, W) bool: free cells with an unknown 8-neighbour."""
+    return free & ndimage.binary_dilation(~known, structure=EIGHT)
+
+
+def _clusters(mask: np.ndarray, min_cells: int) -> tuple[np.ndarray, np.ndarray]:
+    """8-connected labels renumbered 1..F over clusters of at least `min_cells`, and sizes."""
+    labels, n = ndimage.label(mask, structure=EIGHT)
+    sizes = np.bincount(labels.ravel(), minlength=n + 1)
+    keep = sizes >= min_cells
+    keep[0] = False
+    renumber = np.zeros(n + 1, np.int32)
+    renumber[keep] = np.arange(1, int(keep.sum()) + 1, dtype=np.int32)
+    return renumber[labels], sizes[keep]
+
+
+def _anchors(labels: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 2) float centroid (row, col) and (n, 2) int anchor cell of each cluster."""
+    rc = np.argwhere(labels > 0)
+    lab = labels[rc[:, 0], rc[:, 1]] - 1
+    counts = np.bincount(lab, minlength=n)
+    centroid = np.stack(
+        [np.bincount(lab, weights=rc[:, d], minlength=n) for d in (0, 1)], axis=1
+    ) / counts[:, None]
+    d2 = ((rc - centroid[lab]) ** 2).sum(axis=1)
+    order = np.lexsort((d2, lab))  # by cluster, then nearest first
+    first = np.ones(order.size, bool)
+    first[1:] = lab[order][1:] != lab[order][:-1]
+    return centroid, rc[order[first]]
+
+
+def detect_frontiers(
+    free: np.ndarray, known: np.ndarray, goal_ok: np.ndarray, spec: GridSpec, config: EdgeConfig
+) -> FrontierSet:
+    """Frontier clusters of a grid and their goals f′, chosen among `goal_ok` cells."""
+    labels, sizes = _clusters(frontier_cells(free, known), config.frontier_min_cells)
+    n = int(sizes.size)
+    if n == 0 or not goal_ok.any():
+        return empty_frontiers(free.shape)
+    centroid_rc, anchor_rc = _anchors(labels, n)
+    # For every cell, the nearest allowed goal cell (one Euclidean distance transform).
+    offset, nearest = ndimage.distance_transform_edt(~goal_ok, return_indices=True)
+    goal_rc = np.stack([nearest[d][anchor_rc[:, 0], anchor_rc[:, 1]] for d in (0, 1)], axis=1)
+    ok = offset[anchor_rc[:, 0], anchor_rc[:, 1]] * spec.resolution_m <= config.goal_max_offset_m
+    renumber = np.zeros(n + 1, np.int32)
+    renumber[1:][ok] = np.arange(1, int(ok.sum()) + 1, dtype=np.int32)
+    centroid_xy = spec.centre_of(centroid_rc[ok])  # centre_of takes fractional (row, col) too
+    return FrontierSet(
+        labels=renumber[labels],
+        sizes=sizes[ok],
+        centroid_xy=centroid_xy,
+        anchor_rc=anchor_rc[ok],
+        anchor_xy=spec.centre_of(anchor_rc[ok]),
+        goal_rc=goal_rc[ok].astype(np.int64),
+        goal_xy=spec.centre_of(goal_rc[ok]),
+        dropped_unreachable=int((~ok).sum()),
+    )

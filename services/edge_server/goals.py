@@ -1,0 +1,141 @@
+"""Goal bookkeeping: each robot's active goal, hysteresis, blacklist and goal ids.
+
+A robot keeps its goal while a frontier cell lies within `keep_radius_m` of the goal's frontier
+anchor (frontier ids are renumbered every plan, so goals are matched by place), the robot can
+still reach it and no other robot kept that frontier first. Goals reported invalid or
+unreachable set their place aside for `blacklist_ticks`; reached goals for
+`reached_blacklist_ticks` (a frontier the robot stood at but could not clear is not worth an
+immediate second trip).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from schemas.messages import Goal, GoalStatus
+from services.common.grid import GridSpec
+from services.edge_server.assignment import Scorer, greedy_match
+from services.edge_server.config import EdgeConfig
+from services.edge_server.frontiers import FrontierSet
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ActiveGoal:
+    goal_id: int
+    goal_xy: tuple[float, float]
+    anchor_xy: tuple[float, float]
+    revenue: float
+
+
+@dataclass(frozen=True)
+class Assignment:
+    """The outcome of one plan: robot → frontier index, and the goals to publish."""
+
+    assigned: dict[int, int]
+    new_goals: list[Goal]
+    assignable: int  # frontiers neither blacklisted nor unreachable by every robot
+
+
+class GoalBook:
+    def __init__(self, config: EdgeConfig) -> None:
+        self.config = config
+        self.active: dict[int, ActiveGoal] = {}
+        self.issued: dict[int, tuple[float, float]] = {}  # goal id → goal xy
+        self.blacklist: list[tuple[float, float, int]] = []  # (x, y, expiry tick)
+        self.next_goal_id = 0
+
+    # -- agent reports ---------------------------------------------------------------------
+    def on_status(self, status: GoalStatus) -> None:
+        xy = self.issued.get(status.goal_id)
+        if status.status == "active" or xy is None:
+            return
+        ticks = (self.config.reached_blacklist_ticks if status.status == "reached"
+                 else self.config.blacklist_ticks)
+        if ticks > 0:
+            self.blacklist.append((xy[0], xy[1], status.tick + ticks))
+        current = self.active.get(status.robot_id)
+        if current is not None and current.goal_id == status.goal_id:
+            log.info("robot %d goal %d %s %s", status.robot_id, status.goal_id, status.status,
+                     status.reason)
+            del self.active[status.robot_id]
+
+    def release(self, robot_id: int) -> None:
+        """Free a robot's goal (its agent is gone)."""
+        self.active.pop(robot_id, None)
+
+    # -- planning --------------------------------------------------------------------------
+    def allowed(self, frontiers: FrontierSet, tick: int) -> np.ndarray:
+        """(F,) bool: frontiers whose goal and anchor are clear of every live blacklist entry."""
+        self.blacklist = [b for b in self.blacklist if b[2] > tick]
+        ok = np.ones(len(frontiers), bool)
+        if not self.blacklist or not len(frontiers):
+            return ok
+        bad = np.array([b[:2] for b in self.blacklist])
+        r2 = self.config.blacklist_radius_m**2
+        for xy in (frontiers.goal_xy, frontiers.anchor_xy):
+            d2 = ((xy[:, None, :] - bad[None, :, :]) ** 2).sum(axis=2)
+            ok &= ~(d2 <= r2).any(axis=1)
+        return ok
+
+    def _kept(
+        self, robots: list[int], fields: dict[int, np.ndarray], frontiers: FrontierSet,
+        spec: GridSpec, usable: np.ndarray,
+    ) -> dict[int, int]:
+        """Robot → frontier index for goals that survive (hysteresis)."""
+        kept: dict[int, int] = {}
+        if not len(frontiers):
+            return kept
+        dist, nearest = ndimage.distance_transform_edt(frontiers.labels == 0, return_indices=True)
+        for robot in robots:
+            goal = self.active.get(robot)
+            if goal is None:
+                continue
+            rc = spec.cell_of(np.array([goal.anchor_xy]))
+            grc = spec.cell_of(np.array([goal.goal_xy]))
+            if not (spec.contains(rc)[0] and spec.contains(grc)[0]):
+                continue
+            (r, c), (gr, gc) = rc[0], grc[0]
+            if dist[r, c] * spec.resolution_m > self.config.keep_radius_m:
+                continue
+            f = int(frontiers.labels[nearest[0][r, c], nearest[1][r, c]]) - 1
+            if usable[f] and f not in kept.values() and np.isfinite(fields[robot][gr, gc]):
+                kept[robot] = f
+        return kept
+
+    def plan(
+        self, tick: int, robots: list[int], fields: dict[int, np.ndarray],
+        frontiers: FrontierSet, spec: GridSpec, scorer: Scorer,
+    ) -> Assignment:
+        """Keep surviving goals, give every other robot its best free frontier."""
+        reach = np.array([fields[r][frontiers.goal_rc[:, 0], frontiers.goal_rc[:, 1]]
+                          for r in robots]).reshape(len(robots), len(frontiers))
+        usable = self.allowed(frontiers, tick) & np.isfinite(reach).any(axis=0)
+        kept = self._kept(robots, fields, frontiers, spec, usable)
+        for robot in [r for r in self.active if r not in kept]:
+            del self.active[robot]  # its frontier is gone: replan it
+        scores = scorer.score(reach * spec.resolution_m, frontiers)
+        scores[:, ~usable] = -np.inf
+        scores[:, list(kept.values())] = -np.inf
+        scores[[i for i, r in enumerate(robots) if r in kept], :] = -np.inf
+        new_goals = []
+        assigned = dict(kept)
+        for i, f in greedy_match(scores).items():
+            assigned[robots[i]] = f
+            new_goals.append(self._issue(robots[i], f, tick, frontiers, float(scores[i, f])))
+        return Assignment(dict(sorted(assigned.items())), new_goals, int(usable.sum()))
+
+    def _issue(self, robot: int, f: int, tick: int, frontiers: FrontierSet, score: float) -> Goal:
+        goal_xy = (float(frontiers.goal_xy[f, 0]), float(frontiers.goal_xy[f, 1]))
+        goal_id = self.next_goal_id
+        self.next_goal_id += 1
+        self.issued[goal_id] = goal_xy
+        anchor_xy = (float(frontiers.anchor_xy[f, 0]), float(frontiers.anchor_xy[f, 1]))
+        self.active[robot] = ActiveGoal(goal_id, goal_xy, anchor_xy, score)
+        return Goal(robot_id=robot, tick=tick, goal_id=goal_id, x=goal_xy[0], y=goal_xy[1],
+                    frontier_class="unexplored", revenue=score)

@@ -1,0 +1,140 @@
+"""The merged 2D grid: free floor cells of every placed submap, obstacles from P*.
+
+Free = the free floor cells of all submaps placed by their poses; occupied = P* voxels whose
+centre lies in the obstacle band (z between `obstacle_z_min_m` and `obstacle_z_max_m`), and
+occupied wins over free; unknown otherwise. Bounds are fixed by `grid_bounds_m` or grow (never
+shrink) in steps of `grid_chunk_m` to fit the data, so cell indices stay stable between plans.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from services.common.grid import GridSpec
+from services.edge_server.config import EdgeConfig
+from services.edge_server.merged_map import MergedMap
+from services.edge_server.submap_store import StoredSubmap, SubmapKey, SubmapStore
+
+UNKNOWN, FREE, OCCUPIED = -1, 0, 100
+
+
+@dataclass(frozen=True)
+class GridSnapshot:
+    """One merged grid: spec, int8 cells (-1/0/100) and boolean masks of the same shape."""
+
+    spec: GridSpec
+    cells: np.ndarray
+    free: np.ndarray
+    occupied: np.ndarray
+
+    @property
+    def known(self) -> np.ndarray:
+        return self.free | self.occupied
+
+
+# 2×2 samples per free cell: a rotated submap's cell centres alone leave holes in the world
+# grid (spurious frontiers); samples c/2 apart hit every world cell a cell set covers
+# (covering radius 0.35·c < the world cell's inner radius 0.5·c).
+_SUBSAMPLES = np.array([[0.25, 0.25], [0.75, 0.25], [0.25, 0.75], [0.75, 0.75]])
+
+
+def free_cells_world(sm: StoredSubmap) -> np.ndarray:
+    """(4M, 2) world xy sampling a submap's free cells (cell i covers [i·c, (i+1)·c))."""
+    cells = sm.free_cells.astype(np.float64)
+    xy_submap = ((cells[:, None, :] + _SUBSAMPLES[None]) * sm.cell_m).reshape(-1, 2)
+    return xy_submap @ sm.T_world_submap[:2, :2].T + sm.T_world_submap[:2, 3]
+
+
+def grow_bounds(
+    old: tuple[float, float, float, float] | None, xy: np.ndarray, margin_m: float, chunk_m: float
+) -> tuple[float, float, float, float] | None:
+    """(xmin, ymin, xmax, ymax) covering `old` and `xy` plus a margin, snapped to `chunk_m`."""
+    if xy.shape[0] == 0:
+        return old
+    lo = np.floor((xy.min(axis=0) - margin_m) / chunk_m) * chunk_m
+    hi = np.ceil((xy.max(axis=0) + margin_m) / chunk_m) * chunk_m
+    if old is not None:
+        lo = np.minimum(lo, old[:2])
+        hi = np.maximum(hi, old[2:])
+    return (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+
+
+def world_cells(xy: np.ndarray, resolution_m: float) -> np.ndarray:
+    """(K, 2) unique absolute (row, col) cells of a grid with its origin at (0, 0)."""
+    rc = np.floor(xy[:, ::-1] / resolution_m).astype(np.int64)
+    return np.unique(rc, axis=0) if len(rc) else rc
+
+
+def _mark(mask: np.ndarray, spec: GridSpec, abs_rc: np.ndarray) -> None:
+    """Set absolute cells (origin (0, 0)) in a grid whose origin is a multiple of the cell."""
+    offset = np.round(np.array([spec.origin_y, spec.origin_x]) / spec.resolution_m)
+    rc = abs_rc - offset.astype(np.int64)
+    rc = rc[spec.contains(rc)]
+    mask[rc[:, 0], rc[:, 1]] = True
+
+
+class MergedGrid:
+    """Builds the merged grid from the store and P*, caching each submap's world free cells."""
+
+    def __init__(self, config: EdgeConfig) -> None:
+        self.config = config
+        self.bounds = config.grid_bounds_m
+        self._free_rc: dict[SubmapKey, tuple[int, int, np.ndarray]] = {}
+        self._obstacle_rc: tuple[int, np.ndarray] = (-1, np.zeros((0, 2), np.int64))
+
+    def _all_free_rc(self, store: SubmapStore) -> np.ndarray:
+        """Absolute world cells of every submap's free cells, cached per submap version."""
+        res = self.config.grid_resolution_m
+        parts = []
+        for sm in store.ordered():
+            cached = self._free_rc.get(sm.key)
+            if cached is None or cached[:2] != (sm.version, sm.pose_version):
+                cached = (sm.version, sm.pose_version, world_cells(free_cells_world(sm), res))
+                self._free_rc[sm.key] = cached
+            parts.append(cached[2])
+        return np.concatenate(parts) if parts else np.zeros((0, 2), np.int64)
+
+    def _obstacle_xy(self, merged: MergedMap) -> np.ndarray:
+        z = merged.points_world[:, 2]
+        band = (z >= self.config.obstacle_z_min_m) & (z <= self.config.obstacle_z_max_m)
+        return merged.points_world[band, :2]
+
+    def spec(self) -> GridSpec | None:
+        if self.bounds is None:
+            return None
+        res = self.config.grid_resolution_m
+        lo = np.floor(np.array(self.bounds[:2]) / res) * res  # origin on a cell multiple
+        hi = np.array(self.bounds[2:])
+        width, height = np.maximum(np.ceil((hi - lo) / res - 1e-9).astype(int), 1)
+        return GridSpec(float(lo[0]), float(lo[1]), res, int(height), int(width))
+
+    def update(
+        self, store: SubmapStore, merged: MergedMap, extra_xy: np.ndarray | None = None
+    ) -> GridSnapshot | None:
+        """The grid for the current data; `extra_xy` (e.g. robot positions) must fit too."""
+        res = self.config.grid_resolution_m
+        free_rc = self._all_free_rc(store)
+        if self._obstacle_rc[0] != merged.version:
+            self._obstacle_rc = (merged.version, world_cells(self._obstacle_xy(merged), res))
+        obstacle_rc = self._obstacle_rc[1]
+        if self.config.grid_bounds_m is None:
+            free_xy = (free_rc[:, ::-1] + 0.5) * res
+            obstacle_xy = (obstacle_rc[:, ::-1] + 0.5) * res
+            xy = [free_xy, obstacle_xy] + ([extra_xy] if extra_xy is not None else [])
+            self.bounds = grow_bounds(
+                self.bounds, np.concatenate(xy), self.config.grid_margin_m, self.config.grid_chunk_m
+            )
+        spec = self.spec()
+        if spec is None:
+            return None
+        free = np.zeros(spec.shape, bool)
+        occupied = np.zeros(spec.shape, bool)
+        _mark(free, spec, free_rc)
+        _mark(occupied, spec, obstacle_rc)
+        free &= ~occupied
+        cells = np.full(spec.shape, UNKNOWN, np.int8)
+        cells[free] = FREE
+        cells[occupied] = OCCUPIED
+        return GridSnapshot(spec, cells, free, occupied)

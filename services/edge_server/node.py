@@ -1,0 +1,140 @@
+"""The edge server process: bus wiring around `EdgePlanner` (lockstep: ARCHITECTURE.md).
+
+On Clock(k) with k % sim.edge_every_ticks == 0 the edge plans with everything read so far and
+publishes map/grid, map/frontiers, goals and corrections, then EdgeAck(k) last. The inbox is
+handled strictly in order; wall time is only logged. The `map/cloud` queryable runs on a zenoh
+thread, so it and the main loop share one lock around the planner.
+"""
+
+from __future__ import annotations
+
+import logging
+import signal
+import threading
+import time
+
+import numpy as np
+
+from schemas import decode
+from schemas.messages import (
+    Clock,
+    Cloud,
+    CloudRequest,
+    EdgeAck,
+    GoalStatus,
+    RobotPose,
+    Submap,
+)
+from services.common.bus import Bus, Inbound, Presence, connect
+from services.common.config import SpacemapConfig
+from services.edge_server.planner import EdgePlanner, PlanOutput
+
+log = logging.getLogger(__name__)
+
+POLL_S = 0.1
+REPORT_EVERY_PLANS = 50
+
+
+def _install_stop_handlers(stop: threading.Event) -> None:
+    if threading.current_thread() is not threading.main_thread():
+        return  # signal handlers can only be set from the main thread (embedded use)
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.set())
+
+
+def _subscribe(bus: Bus) -> None:
+    k = bus.keys
+    bus.subscribe(k.clock(), Clock)
+    bus.subscribe(k.any_robot("submap"), Submap)
+    bus.subscribe(k.any_robot("pose"), RobotPose)
+    bus.subscribe(k.any_robot("goal_status"), GoalStatus)
+    bus.watch_liveliness()
+
+
+def cloud_reply(planner: EdgePlanner, tick: int, body: bytes, max_bytes: int) -> Cloud:
+    """The merged cloud P* for a `map/cloud` query (empty body = default request)."""
+    if body:
+        decode(body, CloudRequest, max_bytes)  # validates; raises DecodeError
+    merged = planner.merged
+    return Cloud(tick=tick, points_world=merged.points_world.astype(np.float32),
+                 colors=merged.colors, robot_ids=merged.robot_ids)
+
+
+class EdgeNode:
+    """The edge's loop state: planner, lock, last planned tick."""
+
+    def __init__(self, bus: Bus, config: SpacemapConfig) -> None:
+        self.bus = bus
+        self.config = config
+        self.planner = EdgePlanner(config.edge, config.sim.tick_s)
+        self.lock = threading.Lock()
+        self.last_tick = 0
+        self.plans = 0
+
+    def serve_cloud(self, body: bytes) -> Cloud:
+        with self.lock:
+            return cloud_reply(self.planner, self.last_tick, body, self.config.bus.max_array_bytes)
+
+    def handle(self, item: Inbound | Presence) -> None:
+        if isinstance(item, Presence):
+            if item.role == "agent" and item.ident.isdigit():
+                with self.lock:
+                    self.planner.on_agent(int(item.ident), item.alive)
+                log.info("agent %s %s", item.ident, "alive" if item.alive else "gone")
+            return
+        msg = item.message
+        with self.lock:
+            if isinstance(msg, Submap):
+                self.planner.on_submap(msg)
+            elif isinstance(msg, RobotPose):
+                self.planner.on_pose(msg)
+            elif isinstance(msg, GoalStatus):
+                self.planner.on_goal_status(msg)
+        if isinstance(msg, Clock) and msg.tick % self.config.sim.edge_every_ticks == 0:
+            self.plan_and_publish(msg.tick)
+
+    def plan_and_publish(self, tick: int) -> None:
+        t0 = time.perf_counter()  # for the log only
+        with self.lock:
+            out = self.planner.plan(tick)
+            self.last_tick = tick
+        self.publish(out)
+        self.bus.publish(self.bus.keys.edge_ack(), EdgeAck(tick=tick))  # last
+        self.plans += 1
+        if self.plans % REPORT_EVERY_PLANS == 0:
+            log.info("tick %d: %d voxels, %d frontiers, assigned %s, complete %s, plan %.1f ms",
+                     tick, len(self.planner.merged), len(out.frontiers.frontiers),
+                     out.frontiers.assigned, out.frontiers.complete,
+                     1000 * (time.perf_counter() - t0))
+
+    def publish(self, out: PlanOutput) -> None:
+        k = self.bus.keys
+        if out.grid is not None:
+            self.bus.publish(k.map_grid(), out.grid)
+        self.bus.publish(k.map_frontiers(), out.frontiers)
+        for goal in out.goals:
+            self.bus.publish(k.goal(goal.robot_id), goal)
+        for corr in out.corrections:
+            self.bus.publish(k.correction(corr.robot_id), corr)
+
+
+def main(config: SpacemapConfig) -> None:
+    """Run the edge server until SIGTERM or SIGINT."""
+    stop = threading.Event()
+    _install_stop_handlers(stop)
+    with connect(config.bus) as bus:
+        node = EdgeNode(bus, config)
+        _subscribe(bus)
+        bus.serve(bus.keys.map_cloud(), node.serve_cloud)
+        bus.declare_alive("edge", 0)
+        log.info("edge up on %s, planner %s", config.bus.connect, config.edge.planner)
+        complete_logged = False
+        while not stop.is_set():
+            item = bus.poll(timeout=POLL_S)
+            if item is not None:
+                node.handle(item)
+            if node.planner.judge.complete and not complete_logged:
+                complete_logged = True
+                log.info("exploration complete at tick %s", node.planner.judge.complete_tick)
+    log.info("edge stopped (submap seq gaps: %s)", dict(node.planner.store.seq_gaps))
+

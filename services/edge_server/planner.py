@@ -1,0 +1,143 @@
+"""The edge's functional core: messages in, one planning update out (no bus, no clock).
+
+A plan merges the submaps (P*), builds the merged grid, computes each robot's distance field
+on the inflated grid, finds frontiers with goals f′ that some robot can reach, assigns them and
+judges completion. Everything is driven by message order and tick numbers only.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+
+from schemas.messages import (
+    Correction,
+    Frontier,
+    Frontiers,
+    Goal,
+    GoalStatus,
+    OccupancyGrid,
+    Pose2D,
+    RobotPose,
+    Submap,
+)
+from services.common.planning import distance_fields, inflate
+from services.edge_server.assignment import make_scorer
+from services.edge_server.completion import CompletionJudge
+from services.edge_server.config import EdgeConfig
+from services.edge_server.frontiers import FrontierSet, detect_frontiers, empty_frontiers
+from services.edge_server.goals import GoalBook
+from services.edge_server.merged_grid import GridSnapshot, MergedGrid
+from services.edge_server.merged_map import MergedMap
+from services.edge_server.submap_store import SubmapStore
+
+
+@dataclass(frozen=True)
+class PlanOutput:
+    """What the node publishes for one edge tick, in this order, before its EdgeAck."""
+
+    grid: OccupancyGrid | None
+    frontiers: Frontiers
+    goals: list[Goal]
+    corrections: list[Correction] = field(default_factory=list)
+
+
+def robot_fields(
+    traversable: np.ndarray, starts_rc: dict[int, np.ndarray], snap_cells: float
+) -> dict[int, np.ndarray]:
+    """Path-length field (cells) per robot; a start off the traversable grid snaps to the
+    nearest traversable cell within `snap_cells` (the floor under a robot is never seen)."""
+    H, W = traversable.shape
+    offset, nearest = ndimage.distance_transform_edt(~traversable, return_indices=True)
+    fields = {robot: np.full((H, W), np.inf) for robot in starts_rc}
+    snapped: dict[int, tuple[int, int]] = {}
+    for robot, (r, c) in starts_rc.items():
+        if 0 <= r < H and 0 <= c < W and traversable.any() and offset[r, c] <= snap_cells:
+            snapped[robot] = (int(nearest[0][r, c]), int(nearest[1][r, c]))
+    if snapped:
+        stack = distance_fields(traversable, list(snapped.values()))
+        fields.update(zip(snapped, stack, strict=True))
+    return fields
+
+
+def frontiers_message(tick: int, fs: FrontierSet, complete: bool, assigned: dict[int, int],
+                      resolution_m: float) -> Frontiers:
+    items = [
+        Frontier(
+            frontier_id=i, frontier_class="unexplored",
+            centroid=(float(fs.centroid_xy[i, 0]), float(fs.centroid_xy[i, 1]), 0.0),
+            goal_xy=(float(fs.goal_xy[i, 0]), float(fs.goal_xy[i, 1])),
+            size=int(fs.sizes[i]), gain=float(fs.sizes[i]) * resolution_m, importance=1.0,
+        )
+        for i in range(len(fs))
+    ]
+    return Frontiers(tick=tick, frontiers=items, complete=complete, assigned=assigned)
+
+
+class EdgePlanner:
+    """State of the edge server and its planning update."""
+
+    def __init__(self, config: EdgeConfig, tick_s: float) -> None:
+        self.config = config
+        self.store = SubmapStore(config.voxel_m)
+        self.merged = MergedMap(config.voxel_m)
+        self.grid = MergedGrid(config)
+        self.book = GoalBook(config)
+        self.judge = CompletionJudge(config, tick_s)
+        self.scorer = make_scorer(config.planner)
+        self.poses: dict[int, Pose2D] = {}
+        self.dead: set[int] = set()
+        self.last_grid: GridSnapshot | None = None
+
+    # -- inputs ----------------------------------------------------------------------------
+    def on_submap(self, msg: Submap) -> None:
+        self.store.apply(msg)
+
+    def on_pose(self, msg: RobotPose) -> None:
+        self.poses[msg.robot_id] = msg.pose_world
+
+    def on_goal_status(self, msg: GoalStatus) -> None:
+        self.book.on_status(msg)
+
+    def on_agent(self, robot_id: int, alive: bool) -> None:
+        """Liveliness: a dead agent's goal is freed and it gets no more goals."""
+        if alive:
+            self.dead.discard(robot_id)
+        else:
+            self.dead.add(robot_id)
+            self.book.release(robot_id)
+
+    # -- planning --------------------------------------------------------------------------
+    def active_robots(self) -> list[int]:
+        return sorted(r for r in self.poses if r not in self.dead)
+
+    def plan(self, tick: int) -> PlanOutput:
+        self.merged.update(self.store)
+        robots = self.active_robots()
+        robot_xy = np.array([[self.poses[r].x, self.poses[r].y] for r in robots]).reshape(-1, 2)
+        # Robots widen the grid only once there is data (no grid at all before that).
+        extra_xy = robot_xy if self.store.submaps else None
+        snap = self.grid.update(self.store, self.merged, extra_xy)
+        self.last_grid = snap
+        if snap is None:
+            complete = self.judge.update(tick, 0, 0)
+            return PlanOutput(None, frontiers_message(tick, empty_frontiers((0, 0)), complete, {},
+                                                      self.config.grid_resolution_m), [])
+        spec = snap.spec
+        radius_cells = math.ceil(self.config.robot_radius_m / spec.resolution_m - 1e-9)
+        traversable = snap.free & ~inflate(snap.occupied, radius_cells)
+        starts = dict(zip(robots, spec.cell_of(robot_xy), strict=True))
+        fields = robot_fields(traversable, starts, self.config.start_snap_m / spec.resolution_m)
+        reachable = np.zeros(spec.shape, bool)
+        for f in fields.values():
+            reachable |= np.isfinite(f)
+        fs = detect_frontiers(snap.free, snap.known, reachable, spec, self.config)
+        result = self.book.plan(tick, robots, fields, fs, spec, self.scorer)
+        complete = self.judge.update(tick, result.assignable, int(snap.known.sum()))
+        grid_msg = OccupancyGrid(tick=tick, resolution_m=spec.resolution_m, origin_x=spec.origin_x,
+                                 origin_y=spec.origin_y, cells=snap.cells)
+        return PlanOutput(grid_msg, frontiers_message(tick, fs, complete, result.assigned,
+                                                      spec.resolution_m), result.new_goals)

@@ -1,0 +1,241 @@
+"""Goal following: A* on the inflated local grid, pure pursuit, and goal status checks.
+
+Pure functions (`plan_path`, `pure_pursuit`, `path_blocked`, `segment_times`) plus `Navigator`,
+the per-goal state machine the node drives once per tick. `segment_times` gives the expected
+time t_e of every path segment, so the paper's adaptive validator (time over the last β path
+points against Σ t_e) can replace the whole-goal budget check in `Navigator._check_budget`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from schemas.messages import Goal, GoalState
+from services.common.geometry import wrap_angle
+from services.common.grid import GridSpec
+from services.common.planning import astar, disk, distance_field, inflate
+from services.robot_agent.config import AgentConfig
+from services.robot_agent.local_grid import OCCUPIED, UNKNOWN, LocalGrid
+
+WINDOW_MARGIN_M = 1.0
+
+
+@dataclass(frozen=True)
+class Command:
+    v_mps: float
+    omega_radps: float
+
+
+@dataclass(frozen=True)
+class PlanResult:
+    path_xy: np.ndarray | None  # (K, 2) world xy of cell centres, start to goal
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class StatusEvent:
+    goal_id: int
+    status: GoalState
+    reason: str = ""
+
+
+def inflation_cells(config: AgentConfig, cell_m: float) -> int:
+    return int(math.ceil((config.robot_radius_m + config.inflation_margin_m) / cell_m))
+
+
+def traversable_of(cells: np.ndarray, radius_cells: int, through_unknown: bool) -> np.ndarray:
+    """Cells the robot centre may occupy: not within `radius_cells` of an obstacle."""
+    trav = ~inflate(cells == OCCUPIED, radius_cells)
+    return trav if through_unknown else trav & (cells != UNKNOWN)
+
+
+def _snap(mask: np.ndarray, rc: tuple[int, int], radius_cells: float) -> tuple[int, int] | None:
+    """The cell of `mask` nearest to `rc` within `radius_cells`, or None."""
+    cand = np.argwhere(mask)
+    if cand.size == 0:
+        return None
+    d2 = ((cand - np.asarray(rc)) ** 2).sum(axis=1)
+    i = int(np.argmin(d2))
+    return (int(cand[i, 0]), int(cand[i, 1])) if d2[i] <= radius_cells**2 else None
+
+
+def plan_path(
+    traversable: np.ndarray, spec: GridSpec, start_xy: np.ndarray, goal_xy: np.ndarray,
+    snap_m: float,
+) -> PlanResult:
+    """A* from start to goal; a blocked start or goal moves to the nearest usable cell."""
+    rc = spec.cell_of(np.array([start_xy, goal_xy]))
+    if not spec.contains(rc).all():
+        return PlanResult(None, "goal outside the local grid")
+    start, goal = (int(rc[0, 0]), int(rc[0, 1])), (int(rc[1, 0]), int(rc[1, 1]))
+    snap_cells = snap_m / spec.resolution_m
+    if not traversable[start]:
+        start = _snap(traversable, start, max(snap_cells, 10.0))
+        if start is None:
+            return PlanResult(None, "robot is boxed in by obstacles")
+    reach = np.isfinite(distance_field(traversable, start))
+    if not reach[goal]:
+        goal = _snap(reach, goal, snap_cells)
+        if goal is None:
+            return PlanResult(None, "no path to the goal on the local grid")
+    path_rc = astar(traversable, start, goal)
+    if path_rc is None:  # cannot happen after the reachability check; be safe
+        return PlanResult(None, "A* found no path")
+    return PlanResult(spec.centre_of(path_rc))
+
+
+def path_blocked(grid: LocalGrid, path_xy: np.ndarray, radius_cells: int) -> bool:
+    """True when an occupied cell lies within `radius_cells` of a path point."""
+    if path_xy.shape[0] == 0:
+        return False
+    offsets = np.argwhere(disk(radius_cells)) - radius_cells
+    rc = grid.spec.cell_of(path_xy)
+    around = (rc[:, None, :] + offsets[None, :, :]).reshape(-1, 2)
+    around = around[grid.spec.contains(around)]
+    return bool((grid.values_at(around) == OCCUPIED).any())
+
+
+def segment_times(path_xy: np.ndarray, max_v: float, max_omega: float) -> np.ndarray:
+    """(K-1,) expected seconds t_e per segment: driving at max_v plus turning at max_omega."""
+    d = np.diff(path_xy, axis=0)
+    if d.shape[0] == 0:
+        return np.zeros(0)
+    heading = np.arctan2(d[:, 1], d[:, 0])
+    turn = np.abs(wrap_angle(np.diff(heading, prepend=heading[0])))
+    return np.hypot(d[:, 0], d[:, 1]) / max_v + turn / max_omega
+
+
+def closest_index(path_xy: np.ndarray, xy: np.ndarray, from_index: int = 0) -> int:
+    d = np.hypot(*(path_xy[from_index:] - xy).T)
+    return from_index + int(np.argmin(d))
+
+
+def pure_pursuit(
+    pose: tuple[float, float, float], path_xy: np.ndarray, index: int, config: AgentConfig
+) -> Command:
+    """(v, ω) toward the path point one lookahead ahead; turn in place when far off heading."""
+    x, y, yaw = pose
+    xy = np.array([x, y])
+    ahead = path_xy[index:]
+    dist = np.hypot(*(ahead - xy).T)
+    beyond = np.nonzero(dist >= config.lookahead_m)[0]
+    target = ahead[beyond[0]] if beyond.size else ahead[-1]
+    dx, dy = target - xy
+    L = max(math.hypot(dx, dy), 1e-6)
+    alpha = float(wrap_angle(math.atan2(dy, dx) - yaw))
+    w_max = config.max_omega_radps
+    if abs(alpha) > config.turn_in_place_rad:
+        return Command(0.0, float(np.clip(config.k_omega * alpha, -w_max, w_max)))
+    to_end = float(np.hypot(*(path_xy[-1] - xy)))
+    v = min(config.max_v_mps, max(0.1, to_end))  # slow down over the last metre
+    omega = 2.0 * v * math.sin(alpha) / L
+    if abs(omega) > w_max:  # keep the curvature, lower the speed
+        v *= w_max / abs(omega)
+        omega = math.copysign(w_max, omega)
+    return Command(v, omega)
+
+
+class Navigator:
+    """One goal at a time: plan, follow, replan, and report status changes."""
+
+    def __init__(self, config: AgentConfig, tick_s: float) -> None:
+        self.config = config
+        self.tick_s = tick_s
+        self.goal: Goal | None = None
+        self.path_xy: np.ndarray | None = None
+        self.index = 0
+        self.plan_tick = -(10**9)
+        self.goal_tick = 0
+        self.budget_s = math.inf
+        self.best_remaining = math.inf
+        self.best_tick = 0
+        self.state = "idle"
+
+    def set_goal(self, goal: Goal, tick: int) -> StatusEvent | None:
+        """Adopt a goal; the same goal id again changes nothing."""
+        if self.goal is not None and goal.goal_id == self.goal.goal_id:
+            return None
+        self.goal, self.path_xy, self.index = goal, None, 0
+        self.goal_tick, self.best_tick, self.best_remaining = tick, tick, math.inf
+        self.budget_s = math.inf
+        return StatusEvent(goal.goal_id, "active")
+
+    def _finish(self, status: GoalState, reason: str = "") -> StatusEvent:
+        assert self.goal is not None
+        event = StatusEvent(self.goal.goal_id, status, reason)
+        self.goal, self.path_xy, self.state = None, None, "idle"
+        return event
+
+    def _plan(self, grid: LocalGrid, xy: np.ndarray, tick: int) -> PlanResult:
+        assert self.goal is not None
+        spec, cfg = grid.spec, self.config
+        goal_xy = np.array([self.goal.x, self.goal.y])
+        extra = spec.cell_of(np.array([xy, goal_xy]))
+        rows, cols = grid.window(int(WINDOW_MARGIN_M / spec.resolution_m), extra)
+        sub = GridSpec(
+            spec.origin_x + cols.start * spec.resolution_m,
+            spec.origin_y + rows.start * spec.resolution_m,
+            spec.resolution_m, rows.stop - rows.start, cols.stop - cols.start,
+        )
+        cells = grid.cells(rows, cols)
+        radius = inflation_cells(cfg, spec.resolution_m)
+        trav = traversable_of(cells, radius, cfg.plan_through_unknown)
+        result = plan_path(trav, sub, xy, goal_xy, cfg.goal_snap_m)
+        self.plan_tick = tick
+        if result.path_xy is not None:
+            self.path_xy, self.index = result.path_xy, 0
+            if math.isinf(self.budget_s):
+                t_e = float(segment_times(result.path_xy, cfg.max_v_mps, cfg.max_omega_radps).sum())
+                self.budget_s = cfg.time_budget_factor * t_e + cfg.time_budget_slack_s
+            self.best_remaining = self._remaining(xy)
+        return result
+
+    def _remaining(self, xy: np.ndarray) -> float:
+        assert self.path_xy is not None
+        rest = self.path_xy[self.index :]
+        return float(np.hypot(*(rest[0] - xy)) + np.hypot(*np.diff(rest, axis=0).T).sum())
+
+    def _needs_plan(self, grid: LocalGrid, tick: int) -> bool:
+        if self.path_xy is None or tick - self.plan_tick >= self.config.replan_every_ticks:
+            return True
+        ahead = self.path_xy[self.index :]
+        radius = inflation_cells(self.config, grid.spec.resolution_m)
+        return path_blocked(grid, ahead, radius - 1)
+
+    def step(
+        self, pose: tuple[float, float, float], grid: LocalGrid, tick: int
+    ) -> tuple[Command, StatusEvent | None]:
+        """The command for this tick and, when the goal's status changed, the new status."""
+        cfg = self.config
+        if self.goal is None:
+            self.state = "idle"
+            return Command(0.0, cfg.spin_omega_radps), None
+        xy = np.array(pose[:2])
+        if self._needs_plan(grid, tick):
+            result = self._plan(grid, xy, tick)
+            if result.path_xy is None:
+                return Command(0.0, 0.0), self._finish("unreachable", result.reason)
+        assert self.path_xy is not None
+        self.index = closest_index(self.path_xy, xy, self.index)
+        if np.hypot(*(self.path_xy[-1] - xy)) <= cfg.goal_tolerance_m:
+            return Command(0.0, 0.0), self._finish("reached")
+        event = self._check_progress(xy, tick)
+        if event is not None:
+            return Command(0.0, 0.0), event
+        cmd = pure_pursuit(pose, self.path_xy, self.index, cfg)
+        self.state = "turning" if cmd.v_mps == 0.0 else "following"
+        return cmd, None
+
+    def _check_progress(self, xy: np.ndarray, tick: int) -> StatusEvent | None:
+        """Stuck and whole-goal time budget checks (the adaptive β validator comes later)."""
+        remaining = self._remaining(xy)
+        if remaining <= self.best_remaining - self.config.progress_m:
+            self.best_remaining, self.best_tick = remaining, tick
+        if tick - self.best_tick > self.config.stuck_ticks:
+            return self._finish("invalid", "no progress")
+        if (tick - self.goal_tick) * self.tick_s > self.budget_s:
+            return self._finish("invalid", f"time budget {self.budget_s:.0f} s exceeded")
+        return None

@@ -1,0 +1,87 @@
+"""The robot agent process: bus wiring around `AgentCore` (lockstep handshake: ARCHITECTURE.md)."""
+
+from __future__ import annotations
+
+import logging
+import signal
+import threading
+
+from schemas.messages import (
+    Correction,
+    Goal,
+    OccupancyGrid,
+    Odometry,
+    RgbdFrame,
+    RobotPose,
+)
+from services.common.bus import Bus, Inbound, connect
+from services.common.config import SpacemapConfig
+from services.robot_agent.agent import AgentCore
+
+log = logging.getLogger(__name__)
+
+POLL_S = 0.1
+REPORT_EVERY_TICKS = 500
+
+
+def _install_stop_handlers(stop: threading.Event) -> None:
+    if threading.current_thread() is not threading.main_thread():
+        return  # signal handlers can only be set from the main thread (embedded use)
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.set())
+
+
+def _subscribe(bus: Bus, robot_id: int) -> None:
+    k = bus.keys
+    bus.subscribe(k.rgbd(robot_id), RgbdFrame)
+    bus.subscribe(k.odom(robot_id), Odometry)
+    bus.subscribe(k.goal(robot_id), Goal)
+    bus.subscribe(k.correction(robot_id), Correction)
+    bus.subscribe(k.map_grid(), OccupancyGrid)
+    bus.subscribe(k.any_robot("pose"), RobotPose)
+
+
+def _out_key(bus: Bus, robot_id: int, topic: str) -> str:
+    k = bus.keys
+    by_topic = {"pose": k.pose, "submap": k.submap, "goal_status": k.goal_status,
+                "cmd_vel": k.cmd_vel}
+    return by_topic[topic](robot_id)
+
+
+def handle(bus: Bus, core: AgentCore, item: Inbound, tick_s: float) -> None:
+    """Feed one inbound message to the core; on Odometry(k), publish the tick's outputs."""
+    msg = item.message
+    if isinstance(msg, RgbdFrame):
+        core.on_rgbd(msg)
+    elif isinstance(msg, Odometry):
+        for out in core.on_odometry(msg):  # CmdVel(k) is last
+            bus.publish(_out_key(bus, core.robot_id, out.topic), out.message)
+        if msg.tick and msg.tick % REPORT_EVERY_TICKS == 0:
+            sim_s = msg.tick * tick_s
+            key = bus.keys.submap(core.robot_id)
+            log.info("robot %d tick %d: submap traffic %.1f kB per sim second",
+                     core.robot_id, msg.tick, bus.bytes_out[key] / 1000.0 / sim_s)
+    elif isinstance(msg, Goal):
+        core.on_goal(msg)
+    elif isinstance(msg, Correction):
+        core.on_correction(msg)
+    elif isinstance(msg, OccupancyGrid):
+        core.on_grid(msg)
+    elif isinstance(msg, RobotPose):
+        core.on_pose(msg)
+
+
+def main(config: SpacemapConfig, robot_id: int) -> None:
+    """Run robot `robot_id`'s agent until SIGTERM or SIGINT."""
+    stop = threading.Event()
+    _install_stop_handlers(stop)
+    core = AgentCore(config.agent, robot_id, config.sim.tick_s)
+    with connect(config.bus) as bus:
+        _subscribe(bus, robot_id)
+        bus.declare_alive("agent", robot_id)
+        log.info("agent %d up on %s", robot_id, config.bus.connect)
+        while not stop.is_set():
+            item = bus.poll(timeout=POLL_S)
+            if isinstance(item, Inbound):
+                handle(bus, core, item, config.sim.tick_s)
+    log.info("agent %d stopped", robot_id)

@@ -1,0 +1,84 @@
+"""AgentCore on synthetic frames: tick handshake order, submap seq, corrections, a goal run."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from schemas import decode, encode
+from schemas.messages import CmdVel, Correction, Goal, Odometry, Pose2D, RgbdFrame, Submap
+from services.common.geometry import T_from_xyyaw
+from services.robot_agent.agent import AgentCore
+from services.robot_agent.config import AgentConfig
+from services.robot_agent.projection import T_base_cam_forward, intrinsics
+from services.robot_agent.synthetic import BoxWorld, T_world_cam_of, render
+
+K = intrinsics(160, 120, math.radians(84.1))
+T_BASE_CAM = T_base_cam_forward(0.35)
+WORLD = BoxWorld.room(-3.0, 5.0, -3.0, 3.0).with_box((1.5, 1.8, -3.0, 1.0, 0.0, 1.0))
+
+
+def _frame(k: int, pose: tuple[float, float, float]) -> RgbdFrame:
+    depth, rgb = render(WORLD, K, (120, 160), T_world_cam_of(*pose, T_BASE_CAM), 5.0)
+    return RgbdFrame(robot_id=0, tick=k, stamp_ns=k * 10**8, depth_m=depth, rgb=rgb, K=K,
+                     T_base_cam=T_BASE_CAM, range_max_m=5.0)
+
+
+def _odom(k: int, pose: tuple[float, float, float]) -> Odometry:
+    return Odometry(robot_id=0, tick=k, stamp_ns=k * 10**8,
+                    pose_odom=Pose2D(x=pose[0], y=pose[1], yaw=pose[2]), v_mps=0.0, omega_radps=0.0)
+
+
+def _run(core: AgentCore, ticks: int, goal_at: int | None = None):
+    pose = (0.0, 0.0, 0.0)
+    outs_per_tick = []
+    for k in range(ticks):
+        if goal_at is not None and k == goal_at:
+            core.on_goal(Goal(robot_id=0, tick=k, goal_id=7, x=3.5, y=-1.5,
+                              frontier_class="unexplored", revenue=1.0))
+        if k % 2 == 0:
+            core.on_rgbd(_frame(k, pose))
+        outs = core.on_odometry(_odom(k, pose))
+        outs_per_tick.append(outs)
+        cmd = outs[-1].message
+        assert isinstance(cmd, CmdVel)
+        x, y, yaw = pose
+        pose = (x + cmd.v_mps * math.cos(yaw) * 0.1, y + cmd.v_mps * math.sin(yaw) * 0.1,
+                yaw + cmd.omega_radps * 0.1)
+    return pose, outs_per_tick
+
+
+def test_tick_outputs_in_handshake_order_and_submap_seq_without_gaps() -> None:
+    core = AgentCore(AgentConfig(), 0, 0.1)
+    _, ticks = _run(core, 40)
+    seqs = []
+    for k, outs in enumerate(ticks):
+        topics = [o.topic for o in outs]
+        assert topics[0] == "pose" and topics[-1] == "cmd_vel" and topics.count("cmd_vel") == 1
+        assert outs[-1].message.tick == k
+        for o in outs:
+            if o.topic == "submap":
+                msg = decode(encode(o.message), Submap)  # valid on the wire
+                seqs.append(msg.seq)
+                assert msg.points_mm.shape[0] == 3 and msg.free_cells.shape[0] == 2
+    assert seqs == list(range(len(seqs))) and len(seqs) >= 4
+    assert core.mapper.next_id >= 2  # spinning 40 ticks at 0.4 rad/s crosses 45°
+
+
+def test_correction_moves_the_pose_estimate() -> None:
+    core = AgentCore(AgentConfig(), 0, 0.1)
+    core.on_rgbd(_frame(0, (0.0, 0.0, 0.0)))
+    core.on_odometry(_odom(0, (0.0, 0.0, 0.0)))
+    core.on_correction(Correction(robot_id=0, tick=1, submap_ids=np.array([0], np.int32),
+                                  T_world_submap=T_from_xyyaw(0.5, 0.0, 0.0)[None]))
+    pose = core.on_odometry(_odom(1, (1.0, 0.0, 0.0)))[0].message.pose_world
+    assert math.isclose(pose.x, 1.5) and math.isclose(pose.y, 0.0, abs_tol=1e-12)
+
+
+def test_reaches_a_goal_behind_a_wall_from_its_own_depth_frames() -> None:
+    core = AgentCore(AgentConfig(), 0, 0.1)
+    pose, ticks = _run(core, 400, goal_at=20)
+    statuses = [o.message.status for outs in ticks for o in outs if o.topic == "goal_status"]
+    assert statuses == ["active", "reached"], statuses
+    assert math.hypot(pose[0] - 3.5, pose[1] + 1.5) <= 0.4

@@ -1,0 +1,68 @@
+"""Keyframe submaps: delta quantization, resend rules, seq numbering and keyframe switching."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from services.common.geometry import T_from_xyyaw
+from services.robot_agent.config import AgentConfig
+from services.robot_agent.local_map import KeyframeMapper, VoxelSubmap, decode_points_m
+
+CFG = AgentConfig()
+
+
+def _cloud(n: int = 2000, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    return rng.uniform(-4, 4, (n, 3)), rng.integers(0, 256, (n, 3)).astype(np.uint8)
+
+
+def test_delta_round_trip_within_a_millimetre_of_voxel_centres() -> None:
+    pts, cols = _cloud()
+    sub = VoxelSubmap(0, np.eye(4), 0)
+    sub.add_points(pts, cols, CFG.voxel_m)
+    delta = sub.take_delta(CFG.voxel_m, CFG.color_resend)
+    assert delta is not None and delta.points_mm.dtype == np.int16
+    assert delta.points_mm.shape == (3, len(sub))
+    back = decode_points_m(delta.points_mm)
+    centres = (np.floor(pts / CFG.voxel_m) + 0.5) * CFG.voxel_m
+    uniq = np.unique(centres.round(6), axis=0)
+    assert back.shape == uniq.shape
+    # every decoded point is within 1 mm of a true voxel centre, and vice versa
+    np.testing.assert_allclose(np.sort(back, axis=0), np.sort(uniq, axis=0), atol=1e-3)
+    assert int(delta.counts.sum()) == len(pts)
+
+
+def test_only_new_or_changed_voxels_are_resent() -> None:
+    pts, cols = _cloud(500)
+    sub = VoxelSubmap(0, np.eye(4), 0)
+    sub.add_points(pts, cols, CFG.voxel_m)
+    assert sub.take_delta(CFG.voxel_m, CFG.color_resend) is not None
+    assert sub.take_delta(CFG.voxel_m, CFG.color_resend) is None  # nothing changed
+    sub.add_points(pts[:1], cols[:1], CFG.voxel_m)  # count 1 → 2: a power of two
+    delta = sub.take_delta(CFG.voxel_m, CFG.color_resend)
+    assert delta is not None and delta.points_mm.shape[1] == 1 and delta.counts[0] == 2
+    sub.add_points(pts[:1], cols[:1], CFG.voxel_m)  # 3: not resent
+    assert sub.take_delta(CFG.voxel_m, CFG.color_resend) is None
+
+
+def test_free_cells_sent_once() -> None:
+    sub = VoxelSubmap(0, np.eye(4), 0)
+    sub.add_free(np.array([[0.01, 0.01], [0.02, 0.03], [-0.07, 0.12]]), 0.05)
+    delta = sub.take_delta(CFG.voxel_m, CFG.color_resend)
+    assert delta is not None
+    assert sorted(map(tuple, delta.free_cells.T.tolist())) == [(-2, 2), (0, 0)]
+    sub.add_free(np.array([[0.01, 0.01]]), 0.05)
+    assert sub.take_delta(CFG.voxel_m, CFG.color_resend) is None
+
+
+def test_keyframe_switches_on_distance_turn_and_age() -> None:
+    cfg = AgentConfig(keyframe_dist_m=1.0, keyframe_yaw_rad=0.5, keyframe_max_ticks=50)
+    mapper = KeyframeMapper(cfg)
+    assert mapper.needs_keyframe(np.eye(4), 0)
+    first = mapper.start_keyframe(T_from_xyyaw(1.0, 1.0, 0.0), 0)
+    assert first.submap_id == 0
+    assert not mapper.needs_keyframe(T_from_xyyaw(1.5, 1.0, 0.3), 10)
+    assert mapper.needs_keyframe(T_from_xyyaw(2.1, 1.0, 0.0), 10)
+    assert mapper.needs_keyframe(T_from_xyyaw(1.0, 1.0, -0.6), 10)
+    assert mapper.needs_keyframe(T_from_xyyaw(1.0, 1.0, 0.0), 50)
+    assert mapper.start_keyframe(T_from_xyyaw(2.1, 1.0, 0.0), 10).submap_id == 1

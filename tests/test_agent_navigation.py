@@ -1,0 +1,116 @@
+"""Navigation: controller limits, goal following around a wall, unreachable goals, idle spin."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from schemas.messages import Goal
+from services.robot_agent.config import AgentConfig
+from services.robot_agent.local_grid import LocalGrid
+from services.robot_agent.navigation import Command, Navigator, pure_pursuit, segment_times
+
+CFG = AgentConfig()
+DT = 0.1
+
+
+def _goal(x: float, y: float, goal_id: int = 1) -> Goal:
+    return Goal(robot_id=0, tick=0, goal_id=goal_id, x=x, y=y, frontier_class="unexplored",
+                revenue=1.0)
+
+
+def _wall_grid(gap: bool = True) -> LocalGrid:
+    """A 6 m × 6 m walled room split by a wall at x = 1 with a 1 m door at y ∈ [1.5, 2.5]."""
+    grid = LocalGrid.centred(0.0, 0.0, 4.0, 0.05)
+    s = np.arange(-3.0, 3.0, 0.025)
+    walls = [np.stack([s, np.full_like(s, v)], 1) for v in (-3.0, 3.0)]
+    walls += [np.stack([np.full_like(s, v), s], 1) for v in (-3.0, 3.0)]
+    inner = s if not gap else s[(s < 1.5) | (s > 2.5)]
+    walls.append(np.stack([np.full_like(inner, 1.0), inner], 1))
+    grid.update(np.empty((0, 2)), np.concatenate(walls))
+    return grid
+
+
+def _drive(nav: Navigator, grid: LocalGrid, pose: tuple[float, float, float], ticks: int):
+    events = []
+    x, y, yaw = pose
+    for k in range(ticks):
+        cmd, ev = nav.step((x, y, yaw), grid, k)
+        assert abs(cmd.v_mps) <= CFG.max_v_mps + 1e-9
+        assert abs(cmd.omega_radps) <= CFG.max_omega_radps + 1e-9
+        if ev is not None:
+            events.append((k, ev))
+            if ev.status != "active":
+                break
+        x, y = x + cmd.v_mps * math.cos(yaw) * DT, y + cmd.v_mps * math.sin(yaw) * DT
+        yaw += cmd.omega_radps * DT
+        rc = grid.spec.cell_of(np.array([[x, y]]))[0]
+        assert grid.cells()[rc[0], rc[1]] != 100, f"drove into a wall at {x:.2f}, {y:.2f}"
+    return (x, y, yaw), events
+
+
+def test_controller_respects_limits_and_turns_toward_the_goal() -> None:
+    path = np.array([[0.0, 0.0], [0.0, 1.0], [0.0, 2.0]])
+    turn = pure_pursuit((0.0, 0.0, 0.0), path, 0, CFG)  # goal 90° to the left
+    assert turn.v_mps == 0.0 and 0 < turn.omega_radps <= CFG.max_omega_radps
+    right = pure_pursuit((0.0, 0.0, math.pi / 2 + 0.3), path, 0, CFG)
+    assert right.v_mps > 0 and right.omega_radps < 0
+    ahead = pure_pursuit((0.0, 0.0, math.pi / 2), np.array([[0.0, 0.0], [0.0, 5.0]]), 0, CFG)
+    assert ahead == Command(CFG.max_v_mps, 0.0)
+
+
+def test_reaches_a_goal_behind_a_wall_through_the_door() -> None:
+    grid = _wall_grid()
+    nav = Navigator(CFG, DT)
+    assert nav.set_goal(_goal(2.5, -1.5), 0).status == "active"
+    (x, y, _), events = _drive(nav, grid, (-1.5, -1.5, 0.0), 600)
+    assert events[-1][1].status == "reached", events
+    assert math.hypot(x - 2.5, y + 1.5) <= CFG.goal_tolerance_m
+    assert nav.goal is None and nav.state == "idle"
+
+
+def test_goal_inside_an_obstacle_snaps_to_a_free_cell() -> None:
+    grid = _wall_grid()
+    nav = Navigator(CFG, DT)
+    nav.set_goal(_goal(0.9, 0.5), 0)  # 0.1 m from the wall: inside the inflation
+    nav.step((-1.5, -1.5, 0.0), grid, 0)
+    assert nav.path_xy is not None
+    end = nav.path_xy[-1]
+    assert 0.1 < math.hypot(end[0] - 0.9, end[1] - 0.5) <= CFG.goal_snap_m and end[0] < 0.8
+    (x, y, _), events = _drive(nav, grid, (-1.5, -1.5, 0.0), 400)
+    assert events[-1][1].status == "reached", events
+
+
+def test_unreachable_goal_is_reported() -> None:
+    grid = _wall_grid(gap=False)
+    nav = Navigator(CFG, DT)
+    nav.set_goal(_goal(2.5, 0.0), 0)
+    _, events = _drive(nav, grid, (-1.5, 0.0, 0.0), 5)
+    assert events and events[0][1].status == "unreachable" and events[0][1].reason
+
+
+def test_stuck_robot_reports_invalid() -> None:
+    grid = _wall_grid()
+    nav = Navigator(CFG, DT)
+    nav.set_goal(_goal(2.5, -1.5), 0)
+    status = None
+    for k in range(CFG.stuck_ticks + 5):  # the robot never moves
+        _, ev = nav.step((-1.5, -1.5, 0.0), grid, k)
+        if ev is not None:
+            status = ev
+            break
+    assert status is not None and status.status == "invalid"
+
+
+def test_no_goal_spins_in_place() -> None:
+    cmd, ev = Navigator(CFG, DT).step((0.0, 0.0, 0.0), _wall_grid(), 0)
+    assert ev is None and cmd.v_mps == 0.0 and cmd.omega_radps == CFG.spin_omega_radps
+
+
+def test_same_goal_id_is_not_restarted_and_segment_times_add_up() -> None:
+    nav = Navigator(CFG, DT)
+    assert nav.set_goal(_goal(1.0, 1.0), 0) is not None
+    assert nav.set_goal(_goal(1.0, 1.0), 5) is None
+    t = segment_times(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]), 0.5, math.pi / 4)
+    np.testing.assert_allclose(t, [2.0, 2.0 + 2.0])

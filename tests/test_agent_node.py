@@ -1,0 +1,36 @@
+"""node.handle: publishes a tick's outputs on the robot's keys, CmdVel last (fake bus)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from schemas import Keys
+from schemas.messages import Message, Odometry, Pose2D, RobotPose
+from services.common.bus import Inbound
+from services.robot_agent.agent import AgentCore
+from services.robot_agent.config import AgentConfig
+from services.robot_agent.node import handle
+
+
+class FakeBus:
+    def __init__(self) -> None:
+        self.keys = Keys("spacemap")
+        self.sent: list[tuple[str, Message]] = []
+        self.bytes_out: dict[str, int] = {}
+
+    def publish(self, key: str, message: Message) -> int:
+        self.sent.append((key, message))
+        return 0
+
+
+def test_handle_odometry_publishes_pose_then_cmd_vel_on_own_keys() -> None:
+    bus, core = FakeBus(), AgentCore(AgentConfig(), 3, 0.1)
+    other = RobotPose(robot_id=1, tick=0, stamp_ns=0, pose_world=Pose2D(x=1.0, y=0.0, yaw=0.0))
+    handle(bus, core, Inbound("spacemap/robot/1/pose", other), 0.1)  # type: ignore[arg-type]
+    odom = Odometry(robot_id=3, tick=5, stamp_ns=5, pose_odom=Pose2D(x=0.0, y=0.0, yaw=0.0),
+                    v_mps=0.0, omega_radps=0.0)
+    handle(bus, core, Inbound("spacemap/robot/3/odom", odom), 0.1)  # type: ignore[arg-type]
+    keys = [k for k, _ in bus.sent]
+    assert keys == ["spacemap/robot/3/pose", "spacemap/robot/3/cmd_vel"]
+    assert bus.sent[-1][1].tick == 5 and 1 in core.teammates
+    assert np.isclose(bus.sent[-1][1].omega_radps, AgentConfig().spin_omega_radps)

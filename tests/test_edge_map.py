@@ -1,0 +1,104 @@
+"""Edge server: submap store, merged cloud P* and merged grid."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from schemas.messages import Submap
+from services.common.geometry import T_from_xyyaw
+from services.common.voxels import centres, unpack
+from services.edge_server.config import EdgeConfig
+from services.edge_server.merged_grid import FREE, OCCUPIED, UNKNOWN, MergedGrid
+from services.edge_server.merged_map import MergedMap
+from services.edge_server.submap_store import SubmapStore
+
+V = 0.05
+
+
+def make_submap(
+    robot: int, submap_id: int, seq: int, tick: int, T: np.ndarray, points_m: np.ndarray,
+    free_cells: np.ndarray | None = None, color: int = 100,
+) -> Submap:
+    points_m = np.asarray(points_m, float).reshape(-1, 3)
+    free = np.zeros((0, 2), np.int16) if free_cells is None else np.asarray(free_cells)
+    return Submap(
+        robot_id=robot, submap_id=submap_id, seq=seq, tick=tick, stamp_ns=tick * 10**8,
+        T_world_submap=T, points_mm=np.round(points_m * 1000).astype(np.int16).T.copy(),
+        colors=np.full((len(points_m), 3), color, np.uint8),
+        counts=np.ones(len(points_m), np.uint16), free_cells=free.astype(np.int16).T.copy(),
+        cell_m=V,
+    )
+
+
+def voxel_centres(idx: np.ndarray) -> np.ndarray:
+    return (np.asarray(idx, float) + 0.5) * V
+
+
+def test_delta_application_round_trip() -> None:
+    store = SubmapStore(V)
+    T = T_from_xyyaw(1.0, 2.0, 0.3)
+    a = voxel_centres([[0, 0, 1], [1, 0, 1], [-3, 2, 4]])
+    b = voxel_centres([[1, 0, 1], [5, 5, 5]])  # one known voxel, one new
+    store.apply(make_submap(0, 0, 0, 1, T, a, np.array([[0, 0], [1, 0]]), color=10))
+    sm = store.apply(make_submap(0, 0, 1, 2, T, b, np.array([[1, 0], [2, 0]]), color=20))
+    got = np.round(centres(unpack(sm.keys), V) * 1000).astype(int)
+    by_voxel = {tuple(p): (int(c), int(t)) for p, c, t in
+                zip(got.tolist(), sm.colors[:, 0], sm.first_tick, strict=True)}
+    assert by_voxel == {(25, 25, 75): (10, 1), (75, 25, 75): (20, 1),  # known voxel refreshed
+                        (-125, 125, 225): (10, 1), (275, 275, 275): (20, 2)}
+    assert sm.first_tick[-1] == 2  # new voxels are appended
+    assert sorted(map(tuple, sm.free_cells.tolist())) == [(0, 0), (1, 0), (2, 0)]
+    assert store.seq_gaps[0] == 0
+    store.apply(make_submap(0, 0, 5, 3, T, b))
+    assert store.seq_gaps[0] == 1
+
+
+def test_merged_map_of_two_overlapping_submaps() -> None:
+    store, merged = SubmapStore(V), MergedMap(V)
+    idx = np.array([[i, 0, 2] for i in range(10)])
+    # Robot 0's submap at the origin; robot 1's frame sits 0.25 m (5 voxels) further along x,
+    # so its voxels 0..9 land on world voxels 5..14: 5 overlap.
+    store.apply(make_submap(0, 0, 0, 1, np.eye(4), voxel_centres(idx), color=1))
+    store.apply(make_submap(1, 0, 0, 2, T_from_xyyaw(0.25, 0, 0), voxel_centres(idx), color=2))
+    assert merged.update(store)
+    assert len(merged) == 15
+    xs = np.round(merged.points_world[:, 0] / V - 0.5).astype(int)
+    np.testing.assert_array_equal(np.sort(xs), np.arange(15))
+    first = merged.robot_ids[np.argsort(xs)]
+    assert first.tolist() == [0] * 10 + [1] * 5  # robot 0 saw the overlap first
+    pts1, _ = merged.robot_cloud(1)
+    assert len(pts1) == 10
+    # Incremental delta, then a pose change (full rebuild) give the same as from scratch.
+    store.apply(make_submap(1, 0, 1, 3, T_from_xyyaw(0.25, 0, 0), voxel_centres([[20, 0, 2]])))
+    assert merged.update(store) and len(merged) == 16
+    assert not merged.update(store)
+    store.set_pose((1, 0), T_from_xyyaw(1.0, 0, 0))
+    merged.update(store)
+    fresh = MergedMap(V)
+    fresh.update(store)
+    np.testing.assert_array_equal(merged.keys, fresh.keys)
+    np.testing.assert_array_equal(merged.robot_ids, fresh.robot_ids)
+    assert len(merged) == 10 + 11 - 0  # robot 1 now starts at voxel 20
+
+
+def test_grid_from_free_cells_and_obstacles() -> None:
+    config = EdgeConfig(grid_margin_m=0.5, grid_chunk_m=0.5)
+    store, merged, grid = SubmapStore(V), MergedMap(V), MergedGrid(config)
+    free = np.array([[i, j] for i in range(20) for j in range(10)])
+    wall = voxel_centres([[10, j, k] for j in range(10) for k in range(1, 8)])  # z 0.075..0.375
+    ceiling = voxel_centres([[5, 5, 30]])  # above the band: not an obstacle
+    T = T_from_xyyaw(2.0, 3.0, 0.0)
+    store.apply(make_submap(0, 0, 0, 1, T, np.concatenate([wall, ceiling]), free))
+    merged.update(store)
+    snap = grid.update(store, merged)
+    assert snap is not None and snap.cells.dtype == np.int8
+    spec = snap.spec
+    def at(x: float, y: float) -> int:
+        r, c = spec.cell_of(np.array([[x, y]]))[0]
+        return int(snap.cells[r, c])
+    assert at(2.0 + 0.125, 3.0 + 0.125) == FREE
+    assert at(2.0 + 10.5 * V, 3.0 + 0.125) == OCCUPIED  # occupied wins over free
+    assert at(2.0 + 5.5 * V, 3.0 + 5.5 * V) == FREE
+    assert at(2.0 - 0.3, 3.0) == UNKNOWN
+    assert (snap.cells == FREE).sum() == 200 - 10
+    assert spec.origin_x <= 1.5 and spec.origin_x + spec.width * V >= 3.5
