@@ -127,10 +127,10 @@ def agent(
 @app.command()
 def worlds() -> None:
     """List the built-in worlds."""
-    from services.simulator.worlds import list_worlds
+    from services.simulator.worlds import WORLDS
 
-    for name, description in list_worlds().items():
-        typer.echo(f"{name}\t{description}")
+    for name in sorted(WORLDS):
+        typer.echo(f"{name}\t{WORLDS[name].description}")
 
 
 def _parse_spawn(text: str) -> list[list[float]]:
