@@ -67,23 +67,35 @@ def test_two_robot_mission_over_the_bus(tmp_path: Path) -> None:
     assert processes_tagged(tmp_path / "logs") == [], "processes left behind"
 
 
-def test_spacemap_run_writes_a_run_folder(tmp_path: Path) -> None:
-    out = tmp_path / "run"
+def _spacemap_run(out: Path, *args: str) -> dict:
     proc = subprocess.run(
-        [sys.executable, "-m", "services", "run", "--robots", "2", "--sim-time", "20",
-         "--seed", "1", "--out", str(out)],
+        [sys.executable, "-m", "services", "run", "--out", str(out), *args],
         cwd=REPO, capture_output=True, text=True, timeout=600,
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
-    metrics = json.loads((out / "metrics.json").read_text())
+    assert processes_tagged(out / "logs") == [], "processes left behind"
+    return json.loads((out / "metrics.json").read_text())
+
+
+def test_spacemap_run_writes_a_run_folder_and_repeats_exactly(tmp_path: Path) -> None:
+    args = ("--robots", "2", "--sim-time", "20", "--seed", "1")
+    out = tmp_path / "run"
+    metrics = _spacemap_run(out, *args)
     for key in ("coverage_3d_pct", "coverage_2d_pct", "total_distance_m", "robots", "world",
                 "seed", "completed", "sim_time_s", "wall_time_s", "bytes_per_robot"):
         assert key in metrics
     assert metrics["robots"] == 2 and metrics["seed"] == 1
     assert metrics["sim_time_s"] >= 19.0
+    assert metrics["coverage_3d_pct"] > 5.0 and metrics["total_distance_m"] > 1.0
     cloud = o3d.io.read_point_cloud(str(out / "merged_map.ply"))
     assert len(cloud.points) > 1000
     for name in ("grid.pgm", "grid.yaml", "config.yaml", "report.md", "timeseries.csv",
                  "trajectory_0_gt.tum", "robot_1_map.ply"):
         assert (out / name).exists(), name
-    assert processes_tagged(out / "logs") == [], "processes left behind"
+    # Lockstep determinism (SPEC §8): same seed and world, identical metrics but wall time.
+    again = _spacemap_run(tmp_path / "again", *args)
+    metrics.pop("wall_time_s"), again.pop("wall_time_s")
+    assert again == metrics
+    for robot in range(2):
+        name = f"trajectory_{robot}_gt.tum"
+        assert (out / name).read_text() == (tmp_path / "again" / name).read_text()

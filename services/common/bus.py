@@ -81,6 +81,13 @@ def open_session(config: BusConfig) -> Iterator[zenoh.Session]:
         session.close()
 
 
+def _direct(callback: Callable[[zenoh.Sample], None]) -> zenoh.handlers.Callback:
+    """Run `callback` on zenoh's receive thread. zenoh-python's default ("indirect") gives
+    each subscriber its own thread, which loses the order between keys that the lockstep
+    determinism relies on; our callbacks only enqueue, so running them inline is safe."""
+    return zenoh.handlers.Callback(callback, indirect=False)
+
+
 @dataclass(frozen=True)
 class Inbound:
     """One decoded message from the inbox."""
@@ -118,7 +125,7 @@ class Bus:
         def on_sample(sample: zenoh.Sample) -> None:
             self.inbox.put(("msg", str(sample.key_expr), sample.payload.to_bytes(), model))
 
-        self._handles.append(self.session.declare_subscriber(key_expr, on_sample))
+        self._handles.append(self.session.declare_subscriber(key_expr, _direct(on_sample)))
 
     def tap(self, key_expr: str, on_bytes: Callable[[str, int], None]) -> None:
         """Count payload sizes on `key_expr` without decoding (runs on a zenoh thread)."""
@@ -126,7 +133,7 @@ class Bus:
         def on_sample(sample: zenoh.Sample) -> None:
             on_bytes(str(sample.key_expr), len(sample.payload.to_bytes()))
 
-        self._handles.append(self.session.declare_subscriber(key_expr, on_sample))
+        self._handles.append(self.session.declare_subscriber(key_expr, _direct(on_sample)))
 
     def watch_liveliness(self) -> None:
         """Push a Presence for every current and future `alive/**` token."""
@@ -137,7 +144,7 @@ class Bus:
 
         self._handles.append(
             self.session.liveliness().declare_subscriber(
-                self.keys.alive_all(), on_token, history=True
+                self.keys.alive_all(), _direct(on_token), history=True
             )
         )
 

@@ -74,6 +74,19 @@ class Monitor:
         with self._bytes_lock:
             return {i: int(self._bytes.get(i, 0)) for i in range(self.robots)}
 
+    def trim_to_common_tick(self) -> None:
+        """Cut ground-truth tracks to the last stamp every robot reached, so a run's files do
+        not depend on which of the final tick's messages arrived before shutdown."""
+        ends = [t.gt_stamps_ns[-1] for t in self.tracks.values() if t.gt_stamps_ns]
+        if not ends:
+            return
+        end = min(ends)
+        for t in self.tracks.values():
+            keep = sum(1 for s in t.gt_stamps_ns if s <= end)
+            del t.gt_stamps_ns[keep:], t.gt_xyyaw[keep:]
+            keep = sum(1 for s in t.est_stamps_ns if s <= end)
+            del t.est_stamps_ns[keep:], t.est_xyyaw[keep:]
+
     @property
     def sim_time_s(self) -> float:
         return self.clock.stamp_ns * 1e-9 if self.clock else 0.0

@@ -32,6 +32,7 @@ def write_run_folder(
 ) -> dict[str, object]:
     """Write every artefact of a run and return metrics.json's content."""
     cloud = fetch_cloud(monitor)
+    monitor.trim_to_common_tick()
     write_ply(out_dir / "merged_map.ply", cloud.points_world, cloud.colors)
     for robot in range(config.sim.robots):
         mine = cloud.robot_ids == robot

@@ -1,0 +1,160 @@
+"""SPEC §5 metrics as pure functions on arrays, and the metrics.json record (SPEC §7).
+
+Percentages are 0-100. 2D masks live on world-aligned grids (services.common.grid.GridSpec);
+grids of different origins are compared at the truth grid's cell centres.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from services.common import voxels
+from services.common.grid import GridSpec
+
+METRICS_KEYS = (
+    "coverage_3d_pct", "coverage_2d_pct", "overlap_3d_pct", "overlap_2d_pct", "rmse_3d_cm",
+    "bounding_volume_pct", "mapping_time_s", "t90_s", "t99_s", "total_distance_m",
+    "bytes_per_robot", "sim_time_s", "wall_time_s", "robots", "world", "planner", "drf", "seed",
+    "completed",
+)
+
+
+def _pct(part: int | float, whole: int | float) -> float:
+    return 100.0 * float(part) / float(whole) if whole else 0.0
+
+
+def _points(points: np.ndarray) -> np.ndarray:
+    return np.asarray(points, dtype=np.float64).reshape(-1, 3)
+
+
+def covered_mask(
+    map_points_world: np.ndarray, gt_points: np.ndarray, radius_m: float
+) -> np.ndarray:
+    """(N_gt,) bool: a map point lies within radius of each ground-truth point."""
+    map_points_world, gt_points = _points(map_points_world), _points(gt_points)
+    if len(map_points_world) == 0:
+        return np.zeros(len(gt_points), dtype=bool)
+    dist, _ = cKDTree(map_points_world).query(gt_points, distance_upper_bound=radius_m)
+    return np.isfinite(dist)
+
+
+def coverage_3d(
+    map_points_world: np.ndarray, gt_points: np.ndarray, radius_m: float = 0.10,
+    ghost_mask: np.ndarray | None = None,
+) -> float:
+    """% of (observable) ground-truth points with a non-ghost map point within radius."""
+    pts = _points(map_points_world)
+    if ghost_mask is not None:
+        pts = pts[~np.asarray(ghost_mask, dtype=bool)]
+    return _pct(covered_mask(pts, gt_points, radius_m).sum(), len(_points(gt_points)))
+
+
+def overlap_3d(
+    per_robot_points_world: Sequence[np.ndarray], gt_points: np.ndarray, radius_m: float = 0.10
+) -> float:
+    """% of covered ground-truth points that two or more robots cover."""
+    counts = sum(
+        (covered_mask(p, gt_points, radius_m).astype(np.int32) for p in per_robot_points_world),
+        np.zeros(len(_points(gt_points)), dtype=np.int32),
+    )
+    return _pct((counts >= 2).sum(), (counts >= 1).sum())
+
+
+def resample_mask(mask: np.ndarray, src: GridSpec, dst: GridSpec) -> np.ndarray:
+    """Mask on grid src looked up at grid dst's cell centres (False outside src)."""
+    rows, cols = np.indices(dst.shape)
+    rc = src.cell_of(dst.centre_of(np.stack([rows.ravel(), cols.ravel()], 1)))
+    inside = src.contains(rc)
+    out = np.zeros(dst.height * dst.width, dtype=bool)
+    out[inside] = np.asarray(mask, dtype=bool)[rc[inside, 0], rc[inside, 1]]
+    return out.reshape(dst.shape)
+
+
+def coverage_2d(
+    known_mask: np.ndarray, known_spec: GridSpec, truth_free: np.ndarray, truth_spec: GridSpec
+) -> float:
+    """% of reachable free truth cells that the map knows (free or occupied)."""
+    known = resample_mask(known_mask, known_spec, truth_spec)
+    return _pct((known & truth_free).sum(), np.count_nonzero(truth_free))
+
+
+def overlap_2d(
+    per_robot_known: Sequence[tuple[np.ndarray, GridSpec]], truth_free: np.ndarray,
+    truth_spec: GridSpec,
+) -> float:
+    """% of known truth cells that two or more robots know."""
+    counts = np.zeros(truth_spec.shape, dtype=np.int32)
+    for mask, spec in per_robot_known:
+        counts += resample_mask(mask, spec, truth_spec) & truth_free
+    return _pct((counts >= 2).sum(), (counts >= 1).sum())
+
+
+def rmse_3d_cm(map_points_world: np.ndarray, gt_points: np.ndarray) -> float | None:
+    """RMS distance (cm) from every map point to its nearest ground-truth surface point.
+
+    The floor of this figure is the sampling error: at 1000 pts/m², ≈ √(1/(π·1000)) = 1.8 cm
+    for points lying exactly on the surface.
+    """
+    pts = _points(map_points_world)
+    if len(pts) == 0:
+        return None
+    dist, _ = cKDTree(_points(gt_points)).query(pts)
+    return float(np.sqrt(np.mean(dist**2)) * 100.0)
+
+
+def ghost_voxels(
+    map_points_world: np.ndarray, static_surface_points: np.ndarray, voxel_m: float = 0.05,
+    ghost_dist_m: float = 0.10,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(keys of occupied voxels, bool ghost per voxel): every point of a ghost voxel lies
+    more than ghost_dist from every static surface point."""
+    pts = _points(map_points_world)
+    keys = voxels.pack(voxels.voxel_indices(pts, voxel_m))
+    uniq, inverse = np.unique(keys, return_inverse=True)
+    dist, _ = cKDTree(_points(static_surface_points)).query(
+        pts, distance_upper_bound=ghost_dist_m
+    )
+    near = np.zeros(len(uniq), dtype=bool)
+    near[inverse[np.isfinite(dist)]] = True  # one point near a surface clears the voxel
+    return uniq, ~near
+
+
+def bounding_volume_pct(
+    map_points_world: np.ndarray, static_surface_points: np.ndarray, voxel_m: float = 0.05,
+    ghost_dist_m: float = 0.10,
+) -> float:
+    """Ghost voxel volume as % of all occupied voxel volume (all voxels are equal)."""
+    if len(_points(map_points_world)) == 0:
+        return 0.0
+    uniq, ghost = ghost_voxels(map_points_world, static_surface_points, voxel_m, ghost_dist_m)
+    return _pct(ghost.sum(), len(uniq))
+
+
+def path_length(trajectory_xy: np.ndarray) -> float:
+    """Length (m) of a (T, 2) or (T, 3) polyline."""
+    traj = np.asarray(trajectory_xy, dtype=np.float64)
+    return float(np.linalg.norm(np.diff(traj, axis=0), axis=1).sum()) if len(traj) > 1 else 0.0
+
+
+def t_at_coverage(times_s: np.ndarray, coverage_pct: np.ndarray, pct: float) -> float | None:
+    """First time coverage reaches pct (T90: pct=90), or None if it never does."""
+    reached = np.flatnonzero(np.asarray(coverage_pct) >= pct)
+    return float(np.asarray(times_s)[reached[0]]) if len(reached) else None
+
+
+def assemble_metrics(**values: Any) -> dict[str, Any]:
+    """The metrics.json record: exactly METRICS_KEYS, missing ones None; unknown keys refused."""
+    unknown = set(values) - set(METRICS_KEYS)
+    if unknown:
+        raise KeyError(f"not metrics.json keys: {sorted(unknown)}")
+    out = {}
+    for key in METRICS_KEYS:
+        value = values.get(key)
+        if isinstance(value, np.generic):
+            value = value.item()  # JSON-serialisable scalars
+        out[key] = value
+    return out
