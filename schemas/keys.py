@@ -55,6 +55,10 @@ class Keys:
     def map_cloud(self) -> str:
         return self._k("map", "cloud")
 
+    def map_robot_grid(self) -> str:
+        """Queryable: GridRequest → one robot's own OccupancyGrid (spacemap's addition)."""
+        return self._k("map", "robot_grid")
+
     def edge_ack(self) -> str:
         return self._k("edge", "ack")
 

@@ -128,8 +128,15 @@ class Submap(Message):
     KIND: ClassVar[str] = "submap"
     kind: Literal["submap"] = "submap"
     robot_id: RobotId
-    submap_id: Annotated[int, Field(ge=0)]
-    seq: Annotated[int, Field(ge=0)] = Field(description="per-robot message counter, no gaps")
+    epoch: Annotated[int, Field(ge=0)] = Field(
+        default=0, description="tick at which this agent process started; new after a restart"
+    )
+    submap_id: Annotated[int, Field(ge=0)] = Field(
+        description="unique per robot across agent restarts"
+    )
+    seq: Annotated[int, Field(ge=0)] = Field(
+        description="per (robot, epoch) message counter, no gaps"
+    )
     tick: Tick
     stamp_ns: StampNs
     T_world_submap: Annotated[np.ndarray, ArraySpec("float64", (4, 4))] = Field(
@@ -178,6 +185,7 @@ class Goal(Message):
     y: float
     frontier_class: FrontierClass
     revenue: float
+    cancel: bool = Field(default=False, description="True withdraws goal `goal_id`: stop it")
 
 
 GoalState = Literal["active", "reached", "invalid", "unreachable"]
@@ -241,11 +249,19 @@ class EdgeAck(Message):
 
 
 class CloudRequest(Message):
-    """Query body of `map/cloud`; an empty query payload means the same."""
+    """Query body of `map/cloud`; an empty query payload means the merged map."""
 
     KIND: ClassVar[str] = "cloud_request"
     kind: Literal["cloud_request"] = "cloud_request"
-    per_robot: bool = False
+    robot_id: int = Field(default=-1, ge=-1, le=255, description="-1 = merged P*, else robot's")
+
+
+class GridRequest(Message):
+    """Query body of `map/robot_grid`: one robot's own 2D grid (for the evaluator's overlap)."""
+
+    KIND: ClassVar[str] = "grid_request"
+    kind: Literal["grid_request"] = "grid_request"
+    robot_id: RobotId
 
 
 class Cloud(Message):
@@ -255,7 +271,9 @@ class Cloud(Message):
     kind: Literal["cloud"] = "cloud"
     tick: Tick
     robot_id: int = Field(default=-1, description="-1 for the merged map")
-    points_world: Annotated[np.ndarray, ArraySpec("float32", (None, 3), compress=True)]
+    points_world: Annotated[np.ndarray, ArraySpec("float32", (None, 3), compress=True)] = Field(
+        description="(N, 3) float32 voxel points in the world frame, metres"
+    )
     colors: Annotated[np.ndarray, ArraySpec("uint8", (None, 3), compress=True)]
     robot_ids: Annotated[np.ndarray, ArraySpec("uint8", (None,), compress=True)] = Field(
         description="(N,) robot id of each point's first observer"
@@ -277,6 +295,6 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
     cls.KIND: cls
     for cls in (
         Clock, RgbdFrame, Odometry, CmdVel, RobotPose, Submap, Correction, Goal, GoalStatus,
-        OccupancyGrid, Frontiers, EdgeAck, CloudRequest, Cloud, GtPose,
+        OccupancyGrid, Frontiers, EdgeAck, CloudRequest, GridRequest, Cloud, GtPose,
     )
 }
