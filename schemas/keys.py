@@ -55,6 +55,14 @@ class Keys:
     def map_cloud(self) -> str:
         return self._k("map", "cloud")
 
+    def inventory(self, robot: int | str) -> str:
+        """Queryable on agent `robot`: its own submap Inventory (spacemap's addition)."""
+        return self._k("robot", robot, "inventory")
+
+    def map_inventory(self) -> str:
+        """Queryable on the edge: the Inventory of every submap it merged (spacemap's addition)."""
+        return self._k("map", "inventory")
+
     def map_robot_grid(self) -> str:
         """Queryable: GridRequest → one robot's own OccupancyGrid (spacemap's addition)."""
         return self._k("map", "robot_grid")

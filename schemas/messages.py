@@ -280,6 +280,25 @@ class Cloud(Message):
     )
 
 
+class SubmapInfo(Model):
+    """One submap in an inventory."""
+
+    epoch: Annotated[int, Field(ge=0)]
+    submap_id: Annotated[int, Field(ge=0)]
+    voxels: Annotated[int, Field(ge=0)] = Field(description="distinct voxels held")
+
+
+class Inventory(Message):
+    """What a process holds of the robots' submaps: an agent's own (what it produced and
+    published) on `robot/{id}/inventory`, or the edge's (what it merged) on `map/inventory`.
+    Lets anyone check that nothing a robot mapped was lost on the way."""
+
+    KIND: ClassVar[str] = "inventory"
+    kind: Literal["inventory"] = "inventory"
+    tick: Tick
+    submaps: dict[int, list[SubmapInfo]] = Field(description="robot id → its submaps")
+
+
 class GtPose(Message):
     """Ground-truth pose, for the evaluator only."""
 
@@ -295,6 +314,6 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
     cls.KIND: cls
     for cls in (
         Clock, RgbdFrame, Odometry, CmdVel, RobotPose, Submap, Correction, Goal, GoalStatus,
-        OccupancyGrid, Frontiers, EdgeAck, CloudRequest, GridRequest, Cloud, GtPose,
+        OccupancyGrid, Frontiers, EdgeAck, CloudRequest, GridRequest, Cloud, Inventory, GtPose,
     )
 }

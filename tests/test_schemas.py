@@ -46,6 +46,7 @@ def _samples() -> list[m.Message]:
         m.GridRequest(robot_id=1),
         m.Cloud(tick=1, points_world=rng.random((30, 3), dtype=np.float32),
                 colors=np.zeros((30, 3), dtype=np.uint8), robot_ids=np.zeros(30, dtype=np.uint8)),
+        m.Inventory(tick=4, submaps={1: [m.SubmapInfo(epoch=0, submap_id=3, voxels=120)]}),
         m.GtPose(robot_id=0, tick=1, stamp_ns=1, pose_world=pose),
     ]
 
