@@ -82,3 +82,43 @@ def test_reaches_a_goal_behind_a_wall_from_its_own_depth_frames() -> None:
     statuses = [o.message.status for outs in ticks for o in outs if o.topic == "goal_status"]
     assert statuses == ["active", "reached"], statuses
     assert math.hypot(pose[0] - 3.5, pose[1] + 1.5) <= 0.4
+
+
+def test_submap_epoch_and_ids_unique_across_restarts() -> None:
+    first = AgentCore(AgentConfig(), 0, 0.1)
+    restarted = AgentCore(AgentConfig(), 0, 0.1)
+    pose = (0.0, 0.0, 0.0)
+    first.on_rgbd(_frame(0, pose))
+    a = [o.message for o in first.on_odometry(_odom(0, pose)) if o.topic == "submap"]
+    restarted.on_rgbd(_frame(250, pose))
+    b = [o.message for o in restarted.on_odometry(_odom(250, pose)) if o.topic == "submap"]
+    assert a and b and a[0].epoch == 0 and b[0].epoch == 250
+    assert {m.submap_id for m in a}.isdisjoint({m.submap_id for m in b})
+
+
+def test_edge_away_explores_own_frontiers_and_resends_on_return() -> None:
+    core = AgentCore(AgentConfig(), 0, 0.1)
+    _run(core, 6)  # some map first, edge present: idle spin, no goal
+    assert core.nav.goal is None
+    core.on_edge_presence(False)
+    _, ticks = _run(core, 4)
+    assert core.nav.goal is not None and core.nav.goal.goal_id >= (1 << 30)
+    assert not any(o.topic == "goal_status" for outs in ticks for o in outs)  # own goals only
+    sent_before = core.seq
+    core.on_edge_presence(True)
+    outs = core.on_odometry(_odom(100, (0.0, 0.0, 0.0)))
+    full = [o.message for o in outs if o.topic == "submap"]
+    assert full and core.seq > sent_before
+    n_voxels = sum(len(s) for s in [*core.mapper.done, core.mapper.current])
+    assert sum(m.points_mm.shape[1] for m in full) >= n_voxels  # every voxel again
+    assert outs[-1].topic == "cmd_vel"
+
+
+def test_cancel_drops_the_goal() -> None:
+    core = AgentCore(AgentConfig(), 0, 0.1)
+    _run(core, 22, goal_at=20)
+    assert core.nav.goal is not None
+    core.on_goal(Goal(robot_id=0, tick=22, goal_id=7, x=3.5, y=-1.5, frontier_class="unexplored",
+                      revenue=1.0, cancel=True))
+    core.on_odometry(_odom(23, (0.0, 0.0, 0.0)))
+    assert core.nav.goal is None

@@ -94,13 +94,13 @@ def test_stuck_robot_reports_invalid() -> None:
     grid = _wall_grid()
     nav = Navigator(CFG, DT)
     nav.set_goal(_goal(2.5, -1.5), 0)
-    status = None
-    for k in range(CFG.stuck_ticks + 5):  # the robot never moves
+    status, limit = None, int((5.0 + CFG.validator_slack_s) / DT)  # t_e of a step ≤ 5 s
+    for k in range(limit):  # the robot never moves
         _, ev = nav.step((-1.5, -1.5, 0.0), grid, k)
         if ev is not None:
             status = ev
             break
-    assert status is not None and status.status == "invalid"
+    assert status is not None and status.status == "invalid" and "t_e" in status.reason
 
 
 def test_no_goal_spins_in_place() -> None:

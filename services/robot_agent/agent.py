@@ -2,13 +2,20 @@
 
 `AgentCore.on_odometry(k)` is the lockstep tick handler: it integrates the RGB-D frame of tick
 k (received just before), then returns, in order, RobotPose, Submap deltas, GoalStatus changes
-and last CmdVel(k). The pose estimate is odometry composed with the edge's correction offset
-T_world_odom (identity until a Correction arrives; registration comes later).
+and last CmdVel(k).
+
+Pose chain: T_world_base = T_world_loc · T_loc_odom · T_odom_base. `odom` is the drifting wheel
+odometry, `loc` the frame registration keeps consistent (localization.py; submaps live in it),
+T_world_loc comes from the edge's corrections (identity until one arrives).
+
+Per frame: mutual awareness picks the teammates that may be in view, the DRF zeroes their
+pixels, and only the filtered depth reaches registration, the submap and the grid.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,13 +34,20 @@ from schemas.messages import (
     Submap,
 )
 from services.common.geometry import T_from_xyyaw, invert, transform_points, xyyaw_from_T
+from services.robot_agent.awareness import in_view_partial, visible_paper
 from services.robot_agent.config import AgentConfig
+from services.robot_agent.drf import DrfParams, filter_mask
+from services.robot_agent.exploration import local_frontier_goal
 from services.robot_agent.local_grid import LocalGrid, floor_rays
 from services.robot_agent.local_map import KeyframeMapper, SubmapDelta
-from services.robot_agent.navigation import Command, Navigator, StatusEvent
+from services.robot_agent.localization import FrameRegistrar, RegistrationParams, planar
+from services.robot_agent.navigation import Command, Navigator, StatusEvent, inflation_cells
 from services.robot_agent.projection import cam_to_base, depth_to_points, pixel_colors
 
 log = logging.getLogger(__name__)
+
+SUBMAP_IDS_PER_EPOCH = 10_000
+LOCAL_GOAL_BASE = 1 << 30  # ids of the agent's own goals while the edge is away (never reported)
 
 
 @dataclass(frozen=True)
@@ -44,9 +58,32 @@ class Outgoing:
     message: Message
 
 
+@dataclass(frozen=True)
+class DrfRecord:
+    """The last frame's DRF inputs and output (for benchmarks and tests)."""
+
+    tick: int
+    pose_world: tuple[float, float, float]
+    targets_xy: np.ndarray  # (N, 2) teammates passed to the DRF
+    mask: np.ndarray  # (H, W) bool pixels removed
+
+
 def _xy_in(T_to_from: np.ndarray, xy_from: np.ndarray) -> np.ndarray:
     """Planar transform of (N, 2) points."""
     return xy_from @ T_to_from[:2, :2].T + T_to_from[:2, 3]
+
+
+def hfov_of(K: np.ndarray, width: int) -> float:
+    """Horizontal field of view of a pinhole camera, rad."""
+    return 2.0 * math.atan2(width / 2.0, K[0, 0])
+
+
+def drf_params(cfg: AgentConfig) -> DrfParams:
+    return DrfParams(
+        c=cfg.drf_c, radius_m=cfg.robot_size_m, robot_top_m=cfg.robot_top_m,
+        floor_z_m=0.012, eps_m=cfg.drf_eps_m, min_points=cfg.drf_min_points,
+        voxel_m=cfg.drf_voxel_m,
+    )
 
 
 class AgentCore:
@@ -57,13 +94,24 @@ class AgentCore:
         self.robot_id = robot_id
         self.frame: RgbdFrame | None = None
         self.goal: Goal | None = None
-        self.T_world_odom = np.eye(4)
-        self.T_odom_submaps: dict[int, np.ndarray] = {}
+        self.cancels: list[int] = []
+        self.epoch: int | None = None  # first tick this process handled
+        self.T_world_loc = np.eye(4)
+        self.T_loc_odom = np.eye(4)
+        self.T_loc_submaps: dict[int, np.ndarray] = {}
         self.grid: LocalGrid | None = None
         self.edge_grid: OccupancyGrid | None = None
         self.mapper = KeyframeMapper(config)
+        self.registrar = FrameRegistrar(RegistrationParams())
+        self.n_frames = 0
         self.nav = Navigator(config, tick_s)
         self.teammates: dict[int, RobotPose] = {}
+        self.drf = drf_params(config)
+        self.last_drf: DrfRecord | None = None
+        self.edge_alive = True  # assumed until its liveliness token is seen to go
+        self.resend_pending = False
+        self.local_goals = 0
+        self.local_goal_tick = -(10**9)
         self.seq = 0
 
     # -- inputs that only update state -------------------------------------------------------
@@ -71,6 +119,11 @@ class AgentCore:
         self.frame = frame
 
     def on_goal(self, goal: Goal) -> None:
+        if goal.cancel:
+            self.cancels.append(goal.goal_id)
+            if self.goal is not None and self.goal.goal_id == goal.goal_id:
+                self.goal = None
+            return
         self.goal = goal  # adopted on the next tick, so its status goes out in tick order
 
     def on_grid(self, grid: OccupancyGrid) -> None:
@@ -82,62 +135,156 @@ class AgentCore:
         if pose.robot_id != self.robot_id:
             self.teammates[pose.robot_id] = pose
 
+    def on_edge_presence(self, alive: bool) -> None:
+        """The edge's liveliness token appeared (True) or went (False)."""
+        if alive and not self.edge_alive:
+            self.resend_pending = True  # it may have missed (or lost) any of our submaps
+        if alive != self.edge_alive:
+            log.info("robot %d: edge %s", self.robot_id, "back" if alive else "away")
+        self.edge_alive = alive
+
     def on_correction(self, corr: Correction) -> None:
-        """Move the odometry frame so the newest corrected submap we know lands on its pose."""
+        """Move the loc frame so the newest corrected submap we know lands on its pose."""
         known = [(int(i), T) for i, T in zip(corr.submap_ids, corr.T_world_submap, strict=True)
-                 if int(i) in self.T_odom_submaps]
+                 if int(i) in self.T_loc_submaps]
         if known:
             sid, T_world_submap = max(known, key=lambda item: item[0])
-            self.T_world_odom = T_world_submap @ invert(self.T_odom_submaps[sid])
+            self.T_world_loc = T_world_submap @ invert(self.T_loc_submaps[sid])
 
     # -- the tick ----------------------------------------------------------------------------
     def on_odometry(self, odom: Odometry) -> list[Outgoing]:
+        if self.epoch is None:
+            self.epoch = odom.tick
+            self.mapper.next_id = odom.tick * SUBMAP_IDS_PER_EPOCH
         p = odom.pose_odom
         T_odom_base = T_from_xyyaw(p.x, p.y, p.yaw)
-        T_world_base = self.T_world_odom @ T_odom_base
+        deltas: list[SubmapDelta] = []
+        if self.resend_pending:
+            deltas += self.mapper.resend_all()
+            self.resend_pending = False
+        frame = self.frame if self.frame is not None and self.frame.tick <= odom.tick else None
+        self.frame = None if frame is not None else self.frame
+        T_loc_base = self.T_loc_odom @ T_odom_base
+        points_base = cam = None
+        if frame is not None:
+            cam, points_base = self._filtered_points(frame, T_loc_base, odom.tick)
+            T_loc_base = self._register(points_base, T_odom_base)
+        T_world_base = self.T_world_loc @ T_loc_base
         pose_world = xyyaw_from_T(T_world_base)
+        self._ensure_grid(pose_world)
+        if frame is not None:
+            deltas += self._integrate(frame, cam, points_base, T_loc_base, T_world_base, odom.tick)
+        if odom.tick % self.config.submap_every_ticks == 0:
+            delta = self.mapper.take_delta()
+            deltas += [delta] if delta is not None else []
+        events = self._navigate_goal_inputs(pose_world, odom.tick)
+        cmd, event = self.nav.step(pose_world, self.grid, odom.tick)
+        events += [event] if event is not None else []
+        return self._outputs(odom, pose_world, deltas, events, cmd)
+
+    def _ensure_grid(self, pose_world: tuple[float, float, float]) -> None:
         if self.grid is None:
             self.grid = LocalGrid.centred(
                 pose_world[0], pose_world[1], self.config.grid_half_size_m, self.config.cell_m
             )
             if self.edge_grid is not None:
                 self.grid.merge_edge(self.edge_grid)
-        deltas: list[SubmapDelta] = []
-        if self.frame is not None and self.frame.tick <= odom.tick:
-            deltas += self._integrate(self.frame, T_odom_base, T_world_base, odom.tick)
-            self.frame = None
-        if odom.tick % self.config.submap_every_ticks == 0:
-            delta = self.mapper.take_delta()
-            deltas += [delta] if delta is not None else []
+
+    def _navigate_goal_inputs(self, pose_world: tuple[float, float, float], tick: int
+                              ) -> list[StatusEvent]:
+        """Apply cancels and the pending goal; pick an own goal while the edge is away."""
+        for goal_id in self.cancels:
+            if self.nav.cancel(goal_id):
+                log.info("robot %d goal %d cancelled by the edge", self.robot_id, goal_id)
+        self.cancels = []
+        if self.goal is None and self._wants_local_goal(tick):
+            self.goal = self._local_goal(pose_world, tick)
         events: list[StatusEvent] = []
         if self.goal is not None:
-            event = self.nav.set_goal(self.goal, odom.tick)
+            event = self.nav.set_goal(self.goal, tick)
             events += [event] if event is not None else []
             self.goal = None
-        cmd, event = self.nav.step(pose_world, self.grid, odom.tick)
-        events += [event] if event is not None else []
-        return self._outputs(odom, pose_world, deltas, events, cmd)
+        return events
+
+    def _wants_local_goal(self, tick: int) -> bool:
+        cfg = self.config
+        return (not self.edge_alive and cfg.local_explore and self.nav.goal is None
+                and tick - self.local_goal_tick >= cfg.local_goal_retry_ticks)
+
+    def _local_goal(self, pose_world: tuple[float, float, float], tick: int) -> Goal | None:
+        """The nearest frontier of the agent's own grid, as a goal only this agent knows."""
+        assert self.grid is not None
+        self.local_goal_tick = tick
+        radius = inflation_cells(self.config, self.grid.spec.resolution_m)
+        xy = local_frontier_goal(self.grid, np.array(pose_world[:2]), radius,
+                                 self.config.frontier_min_cells, 2 * self.config.goal_tolerance_m)
+        if xy is None:
+            return None
+        self.local_goals += 1
+        return Goal(robot_id=self.robot_id, tick=tick, goal_id=LOCAL_GOAL_BASE + self.local_goals,
+                    x=float(xy[0]), y=float(xy[1]), frontier_class="unexplored", revenue=0.0)
+
+    # -- perception --------------------------------------------------------------------------
+    def _teammates_in_view(self, pose_world: tuple[float, float, float], frame: RgbdFrame,
+                           tick: int) -> np.ndarray:
+        """(N, 2) world xy of fresh teammate estimates that mutual awareness puts in view."""
+        cfg = self.config
+        fresh = [p.pose_world for p in self.teammates.values()
+                 if tick - p.tick <= cfg.teammate_max_age_ticks]
+        if not fresh:
+            return np.empty((0, 2))
+        xy = np.array([[p.x, p.y] for p in fresh])
+        test = visible_paper if cfg.awareness == "paper" else in_view_partial
+        seen = test(pose_world, xy, radius_m=cfg.robot_size_m,
+                    fov_rad=hfov_of(frame.K, frame.depth_m.shape[1]),
+                    range_m=frame.range_max_m, c=cfg.drf_c)
+        return xy[seen]
+
+    def _filtered_points(self, frame: RgbdFrame, T_loc_base: np.ndarray, tick: int):
+        """Camera points of the frame after the DRF, and the same points in the base frame."""
+        depth = frame.depth_m
+        if self.config.drf:
+            pose_world = xyyaw_from_T(self.T_world_loc @ T_loc_base)  # pre-registration guess
+            targets = self._teammates_in_view(pose_world, frame, tick)
+            mask = np.zeros(depth.shape, bool)
+            if targets.shape[0]:
+                mask = filter_mask(depth, frame.K, frame.T_base_cam, pose_world, targets,
+                                   self.drf)
+                depth = np.where(mask, np.float32(0.0), depth)
+            self.last_drf = DrfRecord(tick, pose_world, targets, mask)
+        cam = depth_to_points(depth, frame.K, self.config.pixel_stride, frame.range_max_m)
+        return cam, cam_to_base(cam.points_cam, frame.T_base_cam)
+
+    def _register(self, points_base: np.ndarray, T_odom_base: np.ndarray) -> np.ndarray:
+        """Registered T_loc_base (or the odometry guess); T_loc_odom takes up the drift found."""
+        guess = self.T_loc_odom @ T_odom_base
+        self.n_frames += 1
+        if not self.config.registration or (self.n_frames - 1) % self.config.register_every_frames:
+            return guess
+        outcome = self.registrar.register(points_base, guess)
+        # planar() re-orthonormalises, so rounding cannot pile up over thousands of frames
+        self.T_loc_odom = planar(outcome.T_loc_base @ invert(T_odom_base))
+        return outcome.T_loc_base
 
     def _integrate(
-        self, frame: RgbdFrame, T_odom_base: np.ndarray, T_world_base: np.ndarray, tick: int
+        self, frame: RgbdFrame, cam, points_base: np.ndarray, T_loc_base: np.ndarray,
+        T_world_base: np.ndarray, tick: int,
     ) -> list[SubmapDelta]:
         """Add one frame to the current submap (switching keyframes first) and the grid."""
         cfg = self.config
         out: list[SubmapDelta] = []
-        if self.mapper.needs_keyframe(T_odom_base, tick):
+        if self.mapper.needs_keyframe(T_loc_base, tick):
             delta = self.mapper.take_delta()
             out += [delta] if delta is not None else []
-            sub = self.mapper.start_keyframe(T_odom_base, tick)
-            self.T_odom_submaps[sub.submap_id] = sub.T_odom_submap
-        cam = depth_to_points(frame.depth_m, frame.K, cfg.pixel_stride, frame.range_max_m)
-        points_base = cam_to_base(cam.points_cam, frame.T_base_cam)
+            sub = self.mapper.start_keyframe(T_loc_base, tick)
+            self.T_loc_submaps[sub.submap_id] = sub.T_odom_submap
         free_base = floor_rays(
             points_base, frame.T_base_cam[:2, 3], cfg.obstacle_z_min_m, cfg.obstacle_z_max_m,
             cfg.cell_m, cfg.ray_bin_rad,
         )
         floor = points_base[:, 2] <= cfg.obstacle_z_min_m  # the scan's rays cover floor hits
         assert self.mapper.current is not None
-        T_submap_base = invert(self.mapper.current.T_odom_submap) @ T_odom_base
+        T_submap_base = invert(self.mapper.current.T_odom_submap) @ T_loc_base
         self.mapper.integrate(
             transform_points(T_submap_base, points_base),
             pixel_colors(frame.rgb, cam),
@@ -161,6 +308,8 @@ class AgentCore:
         for delta in deltas:
             out.append(Outgoing("submap", self._submap_message(delta, tick, odom.stamp_ns)))
         for ev in events:
+            if ev.goal_id >= LOCAL_GOAL_BASE:  # the agent's own goal: the edge never knew it
+                continue
             log.info("robot %d goal %d: %s %s", rid, ev.goal_id, ev.status, ev.reason)
             out.append(Outgoing("goal_status", GoalStatus(
                 robot_id=rid, tick=tick, goal_id=ev.goal_id, status=ev.status, reason=ev.reason,
@@ -172,8 +321,9 @@ class AgentCore:
 
     def _submap_message(self, delta: SubmapDelta, tick: int, stamp_ns: int) -> Submap:
         msg = Submap(
-            robot_id=self.robot_id, submap_id=delta.submap_id, seq=self.seq, tick=tick,
-            stamp_ns=stamp_ns, T_world_submap=self.T_world_odom @ delta.T_odom_submap,
+            robot_id=self.robot_id, epoch=self.epoch or 0, submap_id=delta.submap_id,
+            seq=self.seq, tick=tick, stamp_ns=stamp_ns,
+            T_world_submap=self.T_world_loc @ delta.T_odom_submap,
             points_mm=delta.points_mm, colors=delta.colors, counts=delta.counts,
             free_cells=delta.free_cells, cell_m=self.config.cell_m,
         )

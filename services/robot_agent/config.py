@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -13,6 +14,23 @@ class AgentConfig(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
     drf: bool = Field(default=True, description="mutual awareness + Dynamic Robot Filter")
+    # -- mutual awareness + DRF (docs/agent.md: how c was chosen) ----------------------------
+    drf_c: float = Field(
+        default=0.25, ge=0, description="buffer c: c/d rad in awareness, ≈ c m around the robot"
+    )
+    awareness: Literal["paper", "partial"] = Field(
+        default="partial",
+        description="paper = whole robot in view (paper's inequality); partial = any part",
+    )
+    robot_size_m: float = Field(default=0.306, gt=0, description="R: largest robot dimension")
+    robot_top_m: float = Field(default=0.42, gt=0, description="top of a teammate + margin")
+    drf_eps_m: float = Field(default=0.08, gt=0, description="DBSCAN eps")
+    drf_min_points: int = Field(default=1, ge=1)
+    drf_voxel_m: float = Field(default=0.03, gt=0, description="voxelize before DBSCAN")
+    teammate_max_age_ticks: int = Field(default=30, ge=1, description="older estimates unused")
+    # -- localization ----------------------------------------------------------------------
+    registration: bool = Field(default=True, description="refine odometry by frame-to-map GICP")
+    register_every_frames: int = Field(default=1, ge=1)
     voxel_m: float = Field(default=0.05, gt=0)
     max_v_mps: float = Field(default=0.5, gt=0)
     max_omega_radps: float = Field(default=math.pi / 4, gt=0)
@@ -50,7 +68,11 @@ class AgentConfig(BaseModel):
     )
     k_omega: float = Field(default=1.5, gt=0, description="turn-in-place gain, 1/s")
     spin_omega_radps: float = Field(default=0.4, ge=0, description="rotation while idle")
-    stuck_ticks: int = Field(default=80, ge=1, description="no progress this long → invalid")
-    progress_m: float = Field(default=0.1, gt=0)
-    time_budget_factor: float = Field(default=3.0, gt=0)
-    time_budget_slack_s: float = Field(default=10.0, ge=0)
+    validator_beta: int = Field(default=20, ge=1, description="β: path points in the window")
+    validator_slack_s: float = Field(
+        default=4.0, ge=0, description="added to Σ t_e over the window (acceleration, slow-down)"
+    )
+    # -- edge away (issue 7) ---------------------------------------------------------------
+    local_explore: bool = Field(default=True, description="own frontiers while the edge is away")
+    frontier_min_cells: int = Field(default=4, ge=1, description="smallest local frontier")
+    local_goal_retry_ticks: int = Field(default=20, ge=1)

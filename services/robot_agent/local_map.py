@@ -53,7 +53,8 @@ class VoxelSubmap:
         self.counts = np.empty(0, np.int64)
         self.sent_counts = np.empty(0, np.int64)  # 0 = never sent
         self.sent_colors = np.empty((0, 3), np.int64)
-        self.free_seen = np.zeros((2 * _FREE_HALF, 2 * _FREE_HALF), bool)  # [x, y] + half
+        self.free_seen: np.ndarray | None = np.zeros((2 * _FREE_HALF, 2 * _FREE_HALF), bool)
+        self.free_done = np.empty((2, 0), np.int64)  # replaces free_seen once finished
         self.pending_free: list[np.ndarray] = []  # (2, M) int64 (x, y) cell batches
 
     def __len__(self) -> int:
@@ -90,7 +91,7 @@ class VoxelSubmap:
         self.keys = merged
 
     def add_free(self, free_xy_submap: np.ndarray, cell_m: float) -> None:
-        if free_xy_submap.shape[0] == 0:
+        if free_xy_submap.shape[0] == 0 or self.free_seen is None:
             return
         ij = np.floor(free_xy_submap / cell_m).astype(np.int64) + _FREE_HALF
         ij = ij[np.all((ij >= 0) & (ij < 2 * _FREE_HALF), axis=1)]
@@ -103,6 +104,24 @@ class VoxelSubmap:
 
     def mean_colors(self) -> np.ndarray:
         return np.round(self.color_sum / np.maximum(self.counts, 1)[:, None]).astype(np.int64)
+
+    def free_cells(self) -> np.ndarray:
+        """(2, M) int64 (x, y) cells ever seen free."""
+        if self.free_seen is None:
+            return self.free_done
+        return np.argwhere(self.free_seen).T - _FREE_HALF
+
+    def finish(self) -> None:
+        """Keep a finished submap small: its free-cell bitmap (640 kB) becomes a cell list."""
+        self.free_done = self.free_cells()
+        self.free_seen = None
+
+    def mark_unsent(self) -> None:
+        """Forget what was sent: the next delta is the whole submap (the edge may have lost it)."""
+        self.sent_counts[:] = 0
+        self.sent_colors[:] = 0
+        cells = self.free_cells()
+        self.pending_free = [cells] if cells.size else []
 
     def take_delta(self, voxel_m: float, color_resend: int) -> SubmapDelta | None:
         """The changed voxels and new free cells since the last call, marked as sent."""
@@ -130,12 +149,17 @@ class VoxelSubmap:
 
 
 class KeyframeMapper:
-    """The current keyframe submap and when to start the next one."""
+    """The current keyframe submap, the finished ones (for resending), and when to switch.
 
-    def __init__(self, config: AgentConfig) -> None:
+    Submap ids start at `id_base` (the agent uses epoch × 10 000), so a restarted agent never
+    reuses an id its previous life sent to the edge.
+    """
+
+    def __init__(self, config: AgentConfig, id_base: int = 0) -> None:
         self.config = config
         self.current: VoxelSubmap | None = None
-        self.next_id = 0
+        self.done: list[VoxelSubmap] = []
+        self.next_id = id_base
 
     def needs_keyframe(self, T_odom_base: np.ndarray, tick: int) -> bool:
         cur = self.current
@@ -150,6 +174,9 @@ class KeyframeMapper:
         )
 
     def start_keyframe(self, T_odom_base: np.ndarray, tick: int) -> VoxelSubmap:
+        if self.current is not None:
+            self.current.finish()
+            self.done.append(self.current)
         self.current = VoxelSubmap(self.next_id, T_odom_base, tick)
         self.next_id += 1
         return self.current
@@ -165,6 +192,15 @@ class KeyframeMapper:
         if self.current is None:
             return None
         return self.current.take_delta(self.config.voxel_m, self.config.color_resend)
+
+    def resend_all(self) -> list[SubmapDelta]:
+        """Every submap in full, oldest first (after the edge came back)."""
+        out = []
+        for sub in [*self.done, *([self.current] if self.current is not None else [])]:
+            sub.mark_unsent()
+            delta = sub.take_delta(self.config.voxel_m, self.config.color_resend)
+            out += [delta] if delta is not None else []
+        return out
 
 
 def decode_points_m(points_mm: np.ndarray) -> np.ndarray:

@@ -1,9 +1,9 @@
 """Goal following: A* on the inflated local grid, pure pursuit, and goal status checks.
 
 Pure functions (`plan_path`, `pure_pursuit`, `path_blocked`, `segment_times`) plus `Navigator`,
-the per-goal state machine the node drives once per tick. `segment_times` gives the expected
-time t_e of every path segment, so the paper's adaptive validator (time over the last β path
-points against Σ t_e) can replace the whole-goal budget check in `Navigator._check_budget`.
+the per-goal state machine the node drives once per tick. Goal validity is the paper's
+adaptive validator (`validator.py`): the robot's time over the last β path points against the
+summed t_e of those points.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ from services.common.grid import GridSpec
 from services.common.planning import astar, disk, distance_field, inflate
 from services.robot_agent.config import AgentConfig
 from services.robot_agent.local_grid import OCCUPIED, UNKNOWN, LocalGrid
+from services.robot_agent.validator import PassLog, expected_times, window_exceeded
 
 WINDOW_MARGIN_M = 1.0
 
@@ -52,7 +53,7 @@ def traversable_of(cells: np.ndarray, radius_cells: int, through_unknown: bool) 
     return trav if through_unknown else trav & (cells != UNKNOWN)
 
 
-def _snap(mask: np.ndarray, rc: tuple[int, int], radius_cells: float) -> tuple[int, int] | None:
+def snap_cell(mask: np.ndarray, rc: tuple[int, int], radius_cells: float) -> tuple[int, int] | None:
     """The cell of `mask` nearest to `rc` within `radius_cells`, or None."""
     cand = np.argwhere(mask)
     if cand.size == 0:
@@ -73,12 +74,12 @@ def plan_path(
     start, goal = (int(rc[0, 0]), int(rc[0, 1])), (int(rc[1, 0]), int(rc[1, 1]))
     snap_cells = snap_m / spec.resolution_m
     if not traversable[start]:
-        start = _snap(traversable, start, max(snap_cells, 10.0))
+        start = snap_cell(traversable, start, max(snap_cells, 10.0))
         if start is None:
             return PlanResult(None, "robot is boxed in by obstacles")
     reach = np.isfinite(distance_field(traversable, start))
     if not reach[goal]:
-        goal = _snap(reach, goal, snap_cells)
+        goal = snap_cell(reach, goal, snap_cells)
         if goal is None:
             return PlanResult(None, "no path to the goal on the local grid")
     path_rc = astar(traversable, start, goal)
@@ -148,10 +149,8 @@ class Navigator:
         self.path_xy: np.ndarray | None = None
         self.index = 0
         self.plan_tick = -(10**9)
-        self.goal_tick = 0
-        self.budget_s = math.inf
-        self.best_remaining = math.inf
-        self.best_tick = 0
+        self.t_e: np.ndarray = np.zeros(0)  # per segment of the current path
+        self.log = PassLog(0)
         self.state = "idle"
 
     def set_goal(self, goal: Goal, tick: int) -> StatusEvent | None:
@@ -159,9 +158,15 @@ class Navigator:
         if self.goal is not None and goal.goal_id == self.goal.goal_id:
             return None
         self.goal, self.path_xy, self.index = goal, None, 0
-        self.goal_tick, self.best_tick, self.best_remaining = tick, tick, math.inf
-        self.budget_s = math.inf
+        self.log = PassLog(tick)
         return StatusEvent(goal.goal_id, "active")
+
+    def cancel(self, goal_id: int) -> bool:
+        """Drop goal `goal_id` if it is the current one (the edge withdrew it); no status."""
+        if self.goal is None or self.goal.goal_id != goal_id:
+            return False
+        self.goal, self.path_xy, self.state = None, None, "idle"
+        return True
 
     def _finish(self, status: GoalState, reason: str = "") -> StatusEvent:
         assert self.goal is not None
@@ -169,10 +174,10 @@ class Navigator:
         self.goal, self.path_xy, self.state = None, None, "idle"
         return event
 
-    def _plan(self, grid: LocalGrid, xy: np.ndarray, tick: int) -> PlanResult:
+    def _plan(self, grid: LocalGrid, pose: tuple[float, float, float], tick: int) -> PlanResult:
         assert self.goal is not None
         spec, cfg = grid.spec, self.config
-        goal_xy = np.array([self.goal.x, self.goal.y])
+        xy, goal_xy = np.array(pose[:2]), np.array([self.goal.x, self.goal.y])
         extra = spec.cell_of(np.array([xy, goal_xy]))
         rows, cols = grid.window(int(WINDOW_MARGIN_M / spec.resolution_m), extra)
         sub = GridSpec(
@@ -186,17 +191,11 @@ class Navigator:
         result = plan_path(trav, sub, xy, goal_xy, cfg.goal_snap_m)
         self.plan_tick = tick
         if result.path_xy is not None:
-            self.path_xy, self.index = result.path_xy, 0
-            if math.isinf(self.budget_s):
-                t_e = float(segment_times(result.path_xy, cfg.max_v_mps, cfg.max_omega_radps).sum())
-                self.budget_s = cfg.time_budget_factor * t_e + cfg.time_budget_slack_s
-            self.best_remaining = self._remaining(xy)
+            # The path starts at the robot's cell: t_e from the robot's pose, then the path.
+            path = np.vstack([xy[None, :], result.path_xy])
+            self.path_xy, self.index = path, 0
+            self.t_e = expected_times(path, pose[2], cfg.max_v_mps, cfg.max_omega_radps)
         return result
-
-    def _remaining(self, xy: np.ndarray) -> float:
-        assert self.path_xy is not None
-        rest = self.path_xy[self.index :]
-        return float(np.hypot(*(rest[0] - xy)) + np.hypot(*np.diff(rest, axis=0).T).sum())
 
     def _needs_plan(self, grid: LocalGrid, tick: int) -> bool:
         if self.path_xy is None or tick - self.plan_tick >= self.config.replan_every_ticks:
@@ -215,27 +214,29 @@ class Navigator:
             return Command(0.0, cfg.spin_omega_radps), None
         xy = np.array(pose[:2])
         if self._needs_plan(grid, tick):
-            result = self._plan(grid, xy, tick)
+            result = self._plan(grid, pose, tick)
             if result.path_xy is None:
                 return Command(0.0, 0.0), self._finish("unreachable", result.reason)
         assert self.path_xy is not None
-        self.index = closest_index(self.path_xy, xy, self.index)
+        index = closest_index(self.path_xy, xy, self.index)
+        self.log.passed(tick, self.t_e[self.index : index])
+        self.index = index
         if np.hypot(*(self.path_xy[-1] - xy)) <= cfg.goal_tolerance_m:
             return Command(0.0, 0.0), self._finish("reached")
-        event = self._check_progress(xy, tick)
+        event = self._check_progress(tick)
         if event is not None:
             return Command(0.0, 0.0), event
         cmd = pure_pursuit(pose, self.path_xy, self.index, cfg)
         self.state = "turning" if cmd.v_mps == 0.0 else "following"
         return cmd, None
 
-    def _check_progress(self, xy: np.ndarray, tick: int) -> StatusEvent | None:
-        """Stuck and whole-goal time budget checks (the adaptive β validator comes later)."""
-        remaining = self._remaining(xy)
-        if remaining <= self.best_remaining - self.config.progress_m:
-            self.best_remaining, self.best_tick = remaining, tick
-        if tick - self.best_tick > self.config.stuck_ticks:
-            return self._finish("invalid", "no progress")
-        if (tick - self.goal_tick) * self.tick_s > self.budget_s:
-            return self._finish("invalid", f"time budget {self.budget_s:.0f} s exceeded")
+    def _check_progress(self, tick: int) -> StatusEvent | None:
+        """The adaptive validator: time over the last β points against their t_e."""
+        cfg = self.config
+        current = float(self.t_e[self.index]) if self.index < self.t_e.size else 0.0
+        if window_exceeded(self.log, tick, self.tick_s, current, cfg.validator_beta,
+                           cfg.validator_slack_s):
+            return self._finish(
+                "invalid", f"slower than t_e over the last {cfg.validator_beta} path points"
+            )
         return None

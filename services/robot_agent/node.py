@@ -14,7 +14,7 @@ from schemas.messages import (
     RgbdFrame,
     RobotPose,
 )
-from services.common.bus import Bus, Inbound, connect
+from services.common.bus import Bus, Inbound, Presence, connect
 from services.common.config import SpacemapConfig
 from services.robot_agent.agent import AgentCore
 
@@ -48,8 +48,12 @@ def _out_key(bus: Bus, robot_id: int, topic: str) -> str:
     return by_topic[topic](robot_id)
 
 
-def handle(bus: Bus, core: AgentCore, item: Inbound, tick_s: float) -> None:
-    """Feed one inbound message to the core; on Odometry(k), publish the tick's outputs."""
+def handle(bus: Bus, core: AgentCore, item: Inbound | Presence, tick_s: float) -> None:
+    """Feed one inbound item to the core; on Odometry(k), publish the tick's outputs."""
+    if isinstance(item, Presence):
+        if item.role == "edge":
+            core.on_edge_presence(item.alive)
+        return
     msg = item.message
     if isinstance(msg, RgbdFrame):
         core.on_rgbd(msg)
@@ -78,10 +82,11 @@ def main(config: SpacemapConfig, robot_id: int) -> None:
     core = AgentCore(config.agent, robot_id, config.sim.tick_s)
     with connect(config.bus) as bus:
         _subscribe(bus, robot_id)
+        bus.watch_liveliness()  # the edge going and coming back (issue 7)
         bus.declare_alive("agent", robot_id)
         log.info("agent %d up on %s", robot_id, config.bus.connect)
         while not stop.is_set():
             item = bus.poll(timeout=POLL_S)
-            if isinstance(item, Inbound):
+            if item is not None:
                 handle(bus, core, item, config.sim.tick_s)
     log.info("agent %d stopped", robot_id)
