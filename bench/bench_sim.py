@@ -1,22 +1,39 @@
-"""Simulator benchmark: RGB-D frame time and real-time factor (SPEC §8).
+"""Simulator benchmark (SPEC §8): RGB-D frame time, real-time factor alone, ground-truth build.
 
-Run: .venv/bin/python bench/bench_sim.py [--world house] [--ticks 300]
-Prints a markdown table of medians.
+Run: .venv/bin/python bench/bench_sim.py [--ticks 300] [--skip-gt]
+Prints a markdown table of medians. The real-time factor is the simulator alone: physics plus
+rendering every robot's camera at the default camera rate, no bus. The ground-truth time is
+the evaluator's build from scratch (empty cache directory) and the later cached load.
 """
 
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 import statistics
+import tempfile
 import time
+from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
+import services.simulator  # noqa: E402, F401  (picks the GL backend before MuJoCo loads)
+from services.evaluator.world_truth import world_ground_truth  # noqa: E402
 from services.simulator.config import SimConfig  # noqa: E402
 from services.simulator.core import Simulation  # noqa: E402
+
+AWS_HOUSE = Path(__file__).resolve().parents[2] / "shared/worlds/aws_small_house/small_house.xml"
+
+
+def worlds() -> dict[str, str]:
+    """Label → world name or path; the AWS house only when ../shared holds it."""
+    out = {"house": "house", "bookstore": "bookstore", "warehouse": "warehouse"}
+    if AWS_HOUSE.is_file():
+        out["AWS house"] = str(AWS_HOUSE)
+    return out
 
 
 def frame_ms(world: str, width: int, height: int, backend: str, segmentation: bool) -> float:
@@ -34,41 +51,68 @@ def frame_ms(world: str, width: int, height: int, backend: str, segmentation: bo
     return 1e3 * statistics.median(times)
 
 
-def realtime_factor(world: str, robots: int, ticks: int, render: bool) -> float:
+def realtime_factor(world: str, robots: int, ticks: int) -> tuple[float, float, float]:
+    """(real-time factor, ms per tick rendering, ms per tick stepping) at the default rates."""
     cfg = SimConfig(world=world, robots=robots)
     sim = Simulation(cfg)
     rng = np.random.default_rng(0)
     sim.render(0)  # GL context set-up is not part of the run
-    t0 = time.perf_counter()
+    render_s = step_s = 0.0
     for k in range(ticks):
-        if render and k % cfg.camera_every_ticks == 0:
+        t0 = time.perf_counter()
+        if k % cfg.camera_every_ticks == 0:
             for i in range(robots):
                 sim.render(i)
+        t1 = time.perf_counter()
         sim.step({i: (rng.uniform(0, 0.5), rng.uniform(-0.7, 0.7)) for i in range(robots)})
-    wall = time.perf_counter() - t0
+        render_s += t1 - t0
+        step_s += time.perf_counter() - t1
     sim.close()
-    return ticks * cfg.tick_s / wall
+    wall = render_s + step_s
+    return ticks * cfg.tick_s / wall, 1e3 * render_s / ticks, 1e3 * step_s / ticks
+
+
+def ground_truth_s(world: str) -> tuple[float, float]:
+    """(build from scratch, cached load) seconds of the evaluator's ground truth of `world`."""
+    cfg = SimConfig(world=world, robots=3)
+    with tempfile.TemporaryDirectory() as cache:
+        t0 = time.perf_counter()
+        world_ground_truth(cfg, Path(cache))
+        t1 = time.perf_counter()
+        world_ground_truth(cfg, Path(cache))
+        return t1 - t0, time.perf_counter() - t1
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--world", default="house")
     parser.add_argument("--ticks", type=int, default=300)
+    parser.add_argument("--skip-gt", action="store_true", help="no ground-truth build times")
     args = parser.parse_args()
-    lines = ["| measure | value |", "|---|---|"]
-    for backend in ("gl", "raycast"):
+    logging.basicConfig(level=logging.WARNING)
+    named = worlds()
+    frame_worlds = [w for w in ("house", "AWS house") if w in named]
+    lines = ["| measure | world | value |", "|---|---|---|"]
+    for label in frame_worlds:
+        for backend in ("gl", "raycast"):
+            for w, h in ((160, 120), (320, 240)):
+                ms = frame_ms(named[label], w, h, backend, segmentation=False)
+                lines.append(f"| RGB-D frame {w}×{h}, {backend} | {label} | {ms:.2f} ms |")
         for w, h in ((160, 120), (320, 240)):
-            ms = frame_ms(args.world, w, h, backend, segmentation=False)
-            lines.append(f"| RGB-D frame {w}×{h}, {backend} | {ms:.2f} ms |")
-    for w, h in ((160, 120), (320, 240)):
-        ms = frame_ms(args.world, w, h, "gl", segmentation=True)
-        lines.append(f"| RGB-D + segmentation {w}×{h}, gl | {ms:.2f} ms |")
-    for robots in (3, 6):
-        for render in (False, True):
-            rtf = realtime_factor(args.world, robots, args.ticks, render)
-            what = "with RGB-D 160×120 every 2nd tick" if render else "physics only"
-            lines.append(f"| real-time factor, {robots} robots, {what} | {rtf:.0f}× |")
-    print(f"Simulator benchmark, world `{args.world}`, medians\n")
+            ms = frame_ms(named[label], w, h, "gl", segmentation=True)
+            lines.append(f"| RGB-D + segmentation {w}×{h}, gl | {label} | {ms:.2f} ms |")
+    runs = [(label, n) for label in frame_worlds for n in (3, 6)] + [("warehouse", 24)]
+    for label, robots in runs:
+        rtf, render_ms, step_ms = realtime_factor(named[label], robots, args.ticks)
+        lines.append(
+            f"| real-time factor, {robots} robots (render {render_ms:.1f} + step {step_ms:.1f}"
+            f" ms/tick) | {label} | {rtf:.1f}× |"
+        )
+    if not args.skip_gt:
+        for label, world in named.items():
+            build, cached = ground_truth_s(world)
+            lines.append(f"| ground truth build / cached load | {label} | "
+                         f"{build:.1f} s / {1e3 * cached:.0f} ms |")
+    print("Simulator benchmark (medians; RGB-D 160×120 every 2nd tick in the real-time factor)\n")
     print("\n".join(lines))
 
 

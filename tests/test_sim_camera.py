@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import math
 
 import mujoco
@@ -9,6 +10,7 @@ import numpy as np
 import pytest
 
 from services.common.geometry import T_from_xyyaw, invert
+from services.simulator import camera as camera_module
 from services.simulator.camera import GEOMGROUP
 from services.simulator.config import SimConfig
 from services.simulator.core import Simulation
@@ -97,3 +99,36 @@ def test_segmentation_labels_a_teammate_ahead() -> None:
     assert teammate.sum() > 50
     assert (img.depth_m[teammate] > 1.0).all() and (img.depth_m[teammate] < 1.7).all()
     sim.close()
+
+
+def test_auto_backend_falls_back_to_ray_casting_and_logs_it(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    def no_gl(width: int, height: int) -> object:
+        raise RuntimeError("no display, no EGL device")
+
+    monkeypatch.setattr(camera_module, "_make_gl_context", no_gl)
+    cfg = SimConfig(world="house", robots=1, render_backend="auto")
+    sim = Simulation(cfg)
+    with caplog.at_level(logging.INFO, logger=camera_module.__name__):
+        img = sim.render(0)
+    assert sim.camera.backend == "raycast"
+    assert any("falls back to mj_multiRay" in r.getMessage() for r in caplog.records)
+    assert any("camera backend raycast" in r.getMessage() for r in caplog.records)
+    assert (img.depth_m > 0).mean() > 0.3
+    with pytest.raises(RuntimeError, match="no EGL device"):
+        Simulation(cfg.model_copy(update={"render_backend": "gl"})).render(0)
+
+
+def test_every_frame_carries_intrinsics_and_extrinsics() -> None:
+    cfg = SimConfig(world="house", robots=2, width=320, height=240)
+    sim = Simulation(cfg)
+    K = sim.K
+    # 84.1° horizontal FoV: the image half-width subtends half the FoV at the focal length.
+    assert math.degrees(2 * math.atan((cfg.width / 2) / K[0, 0])) == pytest.approx(84.1)
+    assert K[0, 0] == pytest.approx(K[1, 1])
+    T = sim.T_base_cam(1)
+    assert T[:3, 3] == pytest.approx([0.05, 0.0, cfg.camera_height_m])
+    assert T[:3, 2] == pytest.approx([1.0, 0.0, 0.0])  # optical axis = base +x
+    assert T[:3, 1] == pytest.approx([0.0, 0.0, -1.0])  # image down = base −z
+    assert sim.render(1).depth_m.shape == (240, 320)

@@ -20,6 +20,10 @@ class SimConfig(BaseModel):
         default=None, description="(x m, y m, yaw rad) per robot; None = the world's defaults"
     )
     tick_s: float = Field(default=0.1, gt=0, description="control period = one lockstep tick")
+    physics_dt_s: float = Field(
+        default=0.005, gt=0, le=0.01,
+        description="MuJoCo timestep, whatever the world file says (≤ contact time constant / 2)",
+    )
     camera_every_ticks: int = Field(default=2, ge=1)
     edge_every_ticks: int = Field(default=10, ge=1, description="edge planning period, ticks")
     width: int = Field(default=160, ge=16, le=640)

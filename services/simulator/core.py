@@ -40,6 +40,7 @@ class WorldModel:
 def build_spec(cfg: SimConfig) -> tuple[mujoco.MjSpec, list[Pose]]:
     """World of `cfg.world` with `cfg.robots` robots at their spawn poses (not compiled)."""
     spec = load_world(cfg.world)
+    spec.option.timestep = cfg.physics_dt_s  # planar robots need no finer step; 2.5× cheaper
     spawns = spawn_poses(cfg.world, cfg.robots, cfg.spawn)
     add_robots(
         spec, spawns, cfg.camera_height_m, vertical_fov_deg(cfg.hfov_deg, cfg.width, cfg.height)

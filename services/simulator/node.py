@@ -47,6 +47,7 @@ class SimNode:
         self.bus, self.cfg, self.stop = bus, cfg, stop
         self.keys = bus.keys
         self.sim = Simulation(cfg)
+        _ = self.sim.camera  # GL set-up now, in the thread that renders, not in the first tick
         n = self.sim.n_robots
         self.live_agents: set[int] = set()
         self.joining: set[int] = set()  # waited for from the next tick on
@@ -176,7 +177,9 @@ class SimNode:
         self.wait_for_peers()
         max_ns = round(self.cfg.max_sim_time_s * 1e9)
         realtime = self.cfg.realtime
+        period_s = self.cfg.tick_s / realtime if realtime is not None else 0.0
         wall0 = time.monotonic()
+        next_wall = wall0 + period_s
         while not self.stop.is_set():
             # Agents that appeared during the last tick are waited for from this tick on.
             self.live_agents |= self.joining
@@ -195,7 +198,8 @@ class SimNode:
                 if not self.wait_for_answers():
                     break
             else:
-                self._pace(wall0 + (self.sim.tick + 1) * self.cfg.tick_s / realtime)
+                self._pace(next_wall)
+                next_wall = self._next_deadline(next_wall, period_s)
             self.timing["wait"] += time.perf_counter() - t0
             t0 = time.perf_counter()
             self.sim.step({i: c for i, c in self.commands.items() if i in self.live_agents})
@@ -204,6 +208,16 @@ class SimNode:
                 self.log_timing(time.monotonic() - wall0)
         self.log_timing(time.monotonic() - wall0)
         self.stop.wait()  # idle until SIGTERM / SIGINT
+
+    def _next_deadline(self, deadline: float, period_s: float) -> float:
+        """The next tick's wall deadline; a backlog over one tick is dropped, not caught up in
+        a burst (a robot's clock runs slow when the machine is overloaded, never fast)."""
+        deadline += period_s
+        now = time.monotonic()
+        if deadline < now - period_s:
+            self.timing["late_ticks"] += 1
+            return now
+        return deadline
 
     def _pace(self, deadline: float) -> None:
         while not self.stop.is_set():
@@ -218,10 +232,11 @@ class SimNode:
         sim_s = self.sim.tick * self.cfg.tick_s
         log.info(
             "tick %d: sim %.1f s in %.1f s wall (%.1fx); per tick ms: publish %.2f "
-            "(render %.2f) wait %.2f step %.2f; %d commands ignored",
+            "(render %.2f) wait %.2f step %.2f; %d commands ignored, %d real-time backlogs dropped",
             self.sim.tick, sim_s, wall_s, sim_s / max(wall_s, 1e-9),
             1e3 * self.timing["publish"] / ticks, 1e3 * self.timing["render"] / ticks,
             1e3 * self.timing["wait"] / ticks, 1e3 * self.timing["step"] / ticks, self.ignored,
+            self.timing["late_ticks"],
         )
 
     def close(self) -> None:

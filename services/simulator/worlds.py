@@ -9,7 +9,8 @@ evaluator):
   has group-1 geometry (otherwise the camera would see the coarse boxes over the real meshes).
 
 Spawns: robots start in rows of three 0.6 m apart facing +x (the paper's setting); the
-default poses of a world come from `spawn_poses`.
+default poses of a world come from `spawn_poses`; a world file without known spawns gets a
+formation placed in its free space automatically (`spawning.auto_spawns`).
 """
 
 from __future__ import annotations
@@ -265,7 +266,8 @@ def _hide_proxies(spec: mujoco.MjSpec) -> None:
 def spawn_poses(
     name_or_path: str, n: int, override: Sequence[Sequence[float]] | None = None
 ) -> list[Pose]:
-    """Spawn poses of `n` robots: `override` (config `sim.spawn`) or the world's defaults."""
+    """Spawn poses of `n` robots: `override` (config `sim.spawn`), the world's defaults, or for
+    a world file without defaults a formation found in its free space (`spawning`)."""
     if override is not None:
         if len(override) < n:
             raise ValueError(f"sim.spawn has {len(override)} poses for {n} robots")
@@ -274,5 +276,7 @@ def spawn_poses(
         Path(name_or_path)
     )
     if grid is None:
-        raise ValueError(f"world {name_or_path!r} has no default spawns: set sim.spawn")
+        from services.simulator.spawning import auto_spawns  # imports this module
+
+        return auto_spawns(load_world(name_or_path).compile(), n)
     return grid.poses(n)
