@@ -71,6 +71,18 @@ def distance_fields(traversable: np.ndarray, starts_rc: list[tuple[int, int]]) -
     return out
 
 
+def reachable(traversable: np.ndarray, start_rc: tuple[int, int]) -> np.ndarray:
+    """Cells reachable from `start_rc`. With no corner cutting, a diagonal step is allowed only
+    when both side cells are free, so 8-connected reachability equals 4-connected labelling."""
+    traversable = np.asarray(traversable, dtype=bool)
+    r, c = start_rc
+    H, W = traversable.shape
+    if not (0 <= r < H and 0 <= c < W) or not traversable[r, c]:
+        return np.zeros_like(traversable)
+    labels, _ = ndimage.label(traversable)
+    return labels == labels[r, c]
+
+
 def distance_field(traversable: np.ndarray, start_rc: tuple[int, int]) -> np.ndarray:
     """Path length in cells from `start_rc` to every cell; inf where unreachable."""
     return distance_fields(traversable, [start_rc])[0]

@@ -16,7 +16,7 @@ import numpy as np
 from schemas.messages import Goal, GoalState
 from services.common.geometry import wrap_angle
 from services.common.grid import GridSpec
-from services.common.planning import astar, disk, distance_field, inflate
+from services.common.planning import astar, disk, inflate, reachable
 from services.robot_agent.config import AgentConfig
 from services.robot_agent.local_grid import OCCUPIED, UNKNOWN, LocalGrid
 from services.robot_agent.validator import PassLog, expected_times, window_exceeded
@@ -77,7 +77,7 @@ def plan_path(
         start = snap_cell(traversable, start, max(snap_cells, 10.0))
         if start is None:
             return PlanResult(None, "robot is boxed in by obstacles")
-    reach = np.isfinite(distance_field(traversable, start))
+    reach = reachable(traversable, start)
     if not reach[goal]:
         goal = snap_cell(reach, goal, snap_cells)
         if goal is None:
