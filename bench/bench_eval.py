@@ -15,9 +15,12 @@ import mujoco
 import numpy as np
 
 from services.evaluator import metrics as mx
+from services.evaluator.config import EvalConfig
 from services.evaluator.free_space import reachable_free_grid
 from services.evaluator.gazebo_map import compare_with_ros_map, load_ros_map
+from services.evaluator.ground_truth import GroundTruth
 from services.evaluator.observable import observable_surface
+from services.evaluator.scoring import Probe, map_quality
 from services.evaluator.surfaces import surface_samples
 
 log = logging.getLogger("bench_eval")
@@ -61,6 +64,13 @@ def main() -> None:
     ]:
         t, value = timed(fn, args.repeat)
         rows.append((name, t, f"{value:.3f}"))
+    # one live time-series sample: coverage, overlap, RMSE, BV with the truth's cached KD-tree
+    probe = Probe(GroundTruth(grid, points, seen), EvalConfig())
+    probe.surface_tree  # noqa: B018 - built once per run, outside the per-sample cost
+    t, quality = timed(lambda: map_quality(probe, map_pts, np.array_split(map_pts, 3)),
+                       args.repeat)
+    rows.append(("map_quality, one time-series sample (200k)", t,
+                 f"coverage {quality['coverage_3d_pct']:.2f} %"))
     lines = ["| step | median s | result |", "|---|---:|---|"]
     lines += [f"| {name} | {t:.3f} | {result} |" for name, t, result in rows]
     log.info("\n".join(lines))

@@ -1,7 +1,9 @@
-"""Files of a run folder: point clouds (PLY), grids (ROS map_server PGM + YAML), TUM poses."""
+"""Files of a run folder: point clouds (PLY), grids (ROS map_server PGM + YAML), TUM poses,
+time series (CSV), JSON; one writer and one reader per format, and the folder's file names."""
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 from pathlib import Path
@@ -13,13 +15,29 @@ import yaml
 
 from schemas import messages as m
 
+_EMPTY_PLY = (
+    "ply\nformat ascii 1.0\nelement vertex 0\nproperty double x\nproperty double y\n"
+    "property double z\nend_header\n"
+)
+
 
 def write_ply(path: Path, points_world: np.ndarray, colors: np.ndarray | None = None) -> None:
+    if len(points_world) == 0:  # open3d refuses to write an empty cloud; a robot may map nothing
+        path.write_text(_EMPTY_PLY)
+        return
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_world.astype(np.float64)))
     if colors is not None and len(colors):
         cloud.colors = o3d.utility.Vector3dVector(colors.astype(np.float64) / 255.0)
     if not o3d.io.write_point_cloud(str(path), cloud, write_ascii=False):
         raise OSError(f"could not write {path}")
+
+
+def read_ply(path: Path) -> np.ndarray:
+    """(N, 3) float64 points of a PLY written by `write_ply` (empty when the cloud is)."""
+    if path.read_bytes() == _EMPTY_PLY.encode():
+        return np.zeros((0, 3))
+    cloud = o3d.io.read_point_cloud(str(path))
+    return np.asarray(cloud.points, dtype=np.float64).reshape(-1, 3)
 
 
 def write_grid(stem: Path, grid: m.OccupancyGrid) -> None:
@@ -75,3 +93,57 @@ def read_tum(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 def write_json(path: Path, data: dict[str, Any]) -> None:
     path.write_text(json.dumps(data, indent=2, sort_keys=False) + "\n")
+
+
+def read_json(path: Path) -> dict[str, Any]:
+    return json.loads(path.read_text())
+
+
+def write_csv(path: Path, rows: list[dict[str, Any]], columns: list[str]) -> None:
+    """Rows as CSV; floats with 4 decimals, None as an empty cell."""
+    with path.open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(columns)
+        for row in rows:
+            writer.writerow([_cell(row.get(c)) for c in columns])
+
+
+def _cell(value: Any) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, float):
+        return f"{value:.4f}"
+    return str(value)
+
+
+def read_csv(path: Path) -> list[dict[str, float | None]]:
+    """Numeric CSV (as written by `write_csv`) → rows; empty cells are None."""
+    with path.open(newline="") as f:
+        return [
+            {k: (float(v) if v not in ("", None) else None) for k, v in row.items()}
+            for row in csv.DictReader(f)
+        ]
+
+
+def robot_map_path(run_dir: Path, robot: int) -> Path:
+    return run_dir / f"robot_{robot}_map.ply"
+
+
+def robot_grid_stem(run_dir: Path, robot: int) -> Path:
+    return run_dir / f"robot_{robot}_grid"
+
+
+def gt_trajectory_path(run_dir: Path, robot: int) -> Path:
+    return run_dir / f"trajectory_{robot}_gt.tum"
+
+
+def est_trajectory_path(run_dir: Path, robot: int) -> Path:
+    return run_dir / f"trajectory_{robot}_est.tum"
+
+
+MERGED_MAP = "merged_map.ply"
+MERGED_GRID = "grid"
+TIMESERIES = "timeseries.csv"
+LIVE = "live.json"  # what only the live run can know: wall time, traffic, completion
+METRICS = "metrics.json"
+FRONTIERS = "frontiers.json"

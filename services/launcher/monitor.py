@@ -7,7 +7,7 @@ reads `eval/` keys, and no service reads what it collects.
 from __future__ import annotations
 
 import threading
-from collections import Counter
+from collections import Counter, OrderedDict
 from dataclasses import dataclass, field
 
 from schemas import messages as m
@@ -37,6 +37,15 @@ class Snapshot:
     frontiers: int
 
 
+RECENT = 64  # edge ticks kept (6.4 s of sim time at the defaults)
+
+
+def _remember(store: OrderedDict, tick: int, value: object) -> None:
+    store[tick] = value
+    while len(store) > RECENT:
+        store.popitem(last=False)
+
+
 class Monitor:
     """Subscribes to everything a run report needs; call `pump()` from the main loop."""
 
@@ -47,6 +56,11 @@ class Monitor:
         self.clock: m.Clock | None = None
         self.grid: m.OccupancyGrid | None = None
         self.frontiers: m.Frontiers | None = None
+        self.complete_tick: int | None = None  # first edge tick that declared completion
+        # recent edge outputs by tick, so a time-series sample can pair the cloud of edge
+        # tick k with the grid and frontiers of the same tick
+        self.recent_grids: OrderedDict[int, m.OccupancyGrid] = OrderedDict()
+        self.recent_frontiers: OrderedDict[int, int] = OrderedDict()
         self.alive: set[tuple[str, str]] = set()
         self.ever_alive: set[tuple[str, str]] = set()
         self.series: list[Snapshot] = []
@@ -87,6 +101,14 @@ class Monitor:
             keep = sum(1 for s in t.est_stamps_ns if s <= end)
             del t.est_stamps_ns[keep:], t.est_xyyaw[keep:]
 
+    def at_tick(self, tick: int) -> tuple[m.OccupancyGrid | None, int]:
+        """(grid, frontier count) the edge published at `tick`, else the latest ones."""
+        grid = self.recent_grids.get(tick, self.grid)
+        fr = self.recent_frontiers.get(tick)
+        if fr is None:
+            fr = len(self.frontiers.frontiers) if self.frontiers else 0
+        return grid, fr
+
     @property
     def sim_time_s(self) -> float:
         return self.clock.stamp_ns * 1e-9 if self.clock else 0.0
@@ -112,9 +134,13 @@ class Monitor:
             self.clock = msg
         elif isinstance(msg, m.OccupancyGrid):
             self.grid = msg
+            _remember(self.recent_grids, msg.tick, msg)
             self._snapshot()
         elif isinstance(msg, m.Frontiers):
             self.frontiers = msg
+            _remember(self.recent_frontiers, msg.tick, len(msg.frontiers))
+            if msg.complete and self.complete_tick is None:
+                self.complete_tick = msg.tick
         elif isinstance(msg, m.GtPose) and msg.robot_id in self.tracks:
             t = self.tracks[msg.robot_id]
             t.gt_stamps_ns.append(msg.stamp_ns)

@@ -1,80 +1,120 @@
-"""The run folder: maps, grid, trajectories, time series, config, metrics and a short report."""
+"""The run folder: maps, grids, trajectories, time series, config, metrics, plots, report.
+
+Metrics are computed by `spacemap eval`'s own code from the files just written, so a run's
+metrics.json and `spacemap eval RUN_DIR` agree by construction.
+"""
 
 from __future__ import annotations
 
-import csv
 import logging
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from schemas import messages as m
 from services.common.config import SpacemapConfig
+from services.evaluator import run_files as rf
+from services.evaluator.evaluate import evaluate_run_folder, load_tracks
+from services.evaluator.plots import plot_coverage, plot_map_top
+from services.evaluator.scoring import Probe, distance_at
 from services.launcher.monitor import Monitor
-from services.launcher.outputs import write_grid, write_json, write_ply, write_tum
+from services.launcher.sampler import CoverageSampler, fetch_robot_grid, robot_clouds
 
 log = logging.getLogger(__name__)
 
-CLOUD_TIMEOUT_S = 30.0
-
-
-def fetch_cloud(monitor: Monitor) -> m.Cloud:
-    """The merged cloud P* from the edge's `map/cloud` queryable."""
-    reply = monitor.bus.query(
-        monitor.bus.keys.map_cloud(), m.CloudRequest(), m.Cloud, timeout=CLOUD_TIMEOUT_S
-    )
-    assert isinstance(reply, m.Cloud)
-    return reply
+SERIES_COLUMNS = [
+    "sim_time_s", "coverage_3d_pct", "coverage_2d_pct", "overlap_3d_pct",
+    "bounding_volume_pct", "ghost_volume_m3", "distance_m", "known_area_m2", "frontiers",
+    "map_points",
+]
 
 
 def write_run_folder(
-    out_dir: Path, config: SpacemapConfig, monitor: Monitor, completed: bool, wall_s: float
-) -> dict[str, object]:
+    out_dir: Path, config: SpacemapConfig, monitor: Monitor, sampler: CoverageSampler,
+    final_cloud: m.Cloud, live: dict[str, Any], probe: Probe,
+) -> dict[str, Any]:
     """Write every artefact of a run and return metrics.json's content."""
-    cloud = fetch_cloud(monitor)
+    robots = config.sim.robots
+    sampler.add(final_cloud)  # the series ends at the final map
     monitor.trim_to_common_tick()
-    write_ply(out_dir / "merged_map.ply", cloud.points_world, cloud.colors)
-    for robot in range(config.sim.robots):
-        mine = cloud.robot_ids == robot
-        write_ply(out_dir / f"robot_{robot}_map.ply", cloud.points_world[mine], cloud.colors[mine])
-    if monitor.grid is not None:
-        write_grid(out_dir / "grid", monitor.grid)
+    _write_maps(out_dir, monitor, final_cloud, robots, live)
     for robot, track in monitor.tracks.items():
-        write_tum(out_dir / f"trajectory_{robot}_gt.tum", track.gt_stamps_ns, track.gt_xyyaw)
-        write_tum(out_dir / f"trajectory_{robot}_est.tum", track.est_stamps_ns, track.est_xyyaw)
-    _write_series(out_dir / "timeseries.csv", monitor)
-    from services.launcher.scoring import score_run
-
-    metrics = score_run(config, cloud, monitor, completed, wall_s)
-    write_json(out_dir / "metrics.json", metrics)
-    _write_report(out_dir / "report.md", metrics, monitor)
+        rf.write_tum(rf.gt_trajectory_path(out_dir, robot), track.gt_stamps_ns, track.gt_xyyaw)
+        rf.write_tum(rf.est_trajectory_path(out_dir, robot), track.est_stamps_ns,
+                     track.est_xyyaw)
+    tracks = load_tracks(out_dir, robots)
+    rows = _with_distance(sampler.rows, tracks)
+    rf.write_csv(out_dir / rf.TIMESERIES, rows, SERIES_COLUMNS)
+    frontiers_xy = _frontiers_xy(monitor.frontiers)
+    rf.write_json(out_dir / rf.FRONTIERS, {"xy": frontiers_xy.tolist()})
+    rf.write_json(out_dir / rf.LIVE, live)
+    metrics = evaluate_run_folder(out_dir, probe)
+    rf.write_json(out_dir / rf.METRICS, metrics)
+    write_plots(out_dir, final_cloud.points_world, tracks, frontiers_xy, rows, metrics)
+    _write_report(out_dir / "report.md", metrics, monitor, live)
     log.info("run folder written: %s", out_dir)
     return metrics
 
 
-def _write_series(path: Path, monitor: Monitor) -> None:
-    with path.open("w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(["sim_time_s", "known_area_m2", "frontiers"])
-        res2 = monitor.grid.resolution_m**2 if monitor.grid else 0.0
-        for row in monitor.series:
-            writer.writerow(
-                [f"{row.sim_time_s:.2f}", f"{row.known_cells * res2:.3f}", row.frontiers]
-            )
+def _write_maps(
+    out_dir: Path, monitor: Monitor, cloud: m.Cloud, robots: int, live: dict[str, Any]
+) -> None:
+    rf.write_ply(out_dir / rf.MERGED_MAP, cloud.points_world, cloud.colors)
+    per_robot, source = robot_clouds(monitor.bus, cloud, robots)
+    live["robot_maps_source"] = source
+    for robot, points in enumerate(per_robot):
+        rf.write_ply(rf.robot_map_path(out_dir, robot), points)
+    if monitor.grid is not None:
+        rf.write_grid(out_dir / rf.MERGED_GRID, monitor.grid)
+    grids = [fetch_robot_grid(monitor.bus, r) for r in range(robots)]
+    live["robot_grids_ok"] = all(g is not None for g in grids)
+    for robot, grid in enumerate(grids):
+        if grid is not None:
+            rf.write_grid(rf.robot_grid_stem(out_dir, robot), grid)
 
 
-def _write_report(path: Path, metrics: dict[str, object], monitor: Monitor) -> None:
+def _with_distance(
+    rows: list[dict[str, Any]], tracks: list[tuple[np.ndarray, np.ndarray]]
+) -> list[dict[str, Any]]:
+    times = np.array([r["sim_time_s"] for r in rows], dtype=np.float64)
+    return [{**r, "distance_m": d} for r, d in zip(rows, distance_at(times, tracks), strict=True)]
+
+
+def _frontiers_xy(frontiers: m.Frontiers | None) -> np.ndarray:
+    if frontiers is None or not frontiers.frontiers:
+        return np.zeros((0, 2))
+    return np.array([f.goal_xy for f in frontiers.frontiers], dtype=np.float64)
+
+
+def write_plots(
+    out_dir: Path, points_world: np.ndarray, tracks: list[tuple[np.ndarray, np.ndarray]],
+    frontiers_xy: np.ndarray, rows: list[dict[str, Any]], metrics: dict[str, Any],
+) -> None:
+    """coverage.png and map_top.png (also rebuilt by `spacemap eval --plots`)."""
+    label = f"{metrics['world']}, {metrics['robots']} robots, {metrics['planner']}" + (
+        "" if metrics["drf"] else ", no DRF")
+    plot_coverage(rows, out_dir / "coverage.png", f"coverage over time ({label})")
+    plot_map_top(points_world, [xy for _, xy in tracks], frontiers_xy, out_dir / "map_top.png",
+                 f"merged map from above ({label})")
+
+
+def _fmt(value: Any) -> str:
+    return f"{value:.3f}" if isinstance(value, float) else str(value)
+
+
+def _write_report(
+    path: Path, metrics: dict[str, Any], monitor: Monitor, live: dict[str, Any]
+) -> None:
     lines = ["# spacemap run", "", "| metric | value |", "|---|---|"]
-    lines += [f"| {k} | {v} |" for k, v in metrics.items()]
-    lines += ["", "| robot | goals assigned | reached | statuses |", "|---|---|---|---|"]
+    lines += [f"| {k} | {_fmt(v)} |" for k, v in metrics.items() if k != "bytes_per_robot"]
+    for robot, b in (metrics.get("bytes_per_robot") or {}).items():
+        lines.append(f"| bytes robot {robot} | {b['total']} ({b['per_sim_s']:.0f} B/sim s) |")
+    lines += ["", f"Per-robot maps: {live.get('robot_maps_source')}; per-robot grids: "
+              f"{'from the edge' if live.get('robot_grids_ok') else 'missing (no 2D overlap)'}.",
+              "", "![coverage](coverage.png)", "", "![map](map_top.png)", ""]
+    lines += ["| robot | goals assigned | reached | statuses |", "|---|---|---|---|"]
     for robot, t in monitor.tracks.items():
         statuses = ", ".join(f"{k}: {v}" for k, v in sorted(t.goal_statuses.items()))
         lines.append(f"| {robot} | {t.goals_assigned} | {t.goals_reached} | {statuses} |")
     path.write_text("\n".join(lines) + "\n")
-
-
-def trajectory_length(xyyaw: list[tuple[float, float, float]]) -> float:
-    if len(xyyaw) < 2:
-        return 0.0
-    xy = np.asarray(xyyaw)[:, :2]
-    return float(np.linalg.norm(np.diff(xy, axis=0), axis=1).sum())

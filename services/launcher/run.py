@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import subprocess
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -12,8 +13,10 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from services.common.bus import connect
 from services.common.config import SpacemapConfig, load_config, write_config
+from services.evaluator.evaluate import probe_for
 from services.launcher.monitor import Monitor
 from services.launcher.report import write_run_folder
+from services.launcher.sampler import CoverageSampler, fetch_cloud
 from services.processes import ProcessGroup, free_tcp_port, spacemap_command
 
 log = logging.getLogger(__name__)
@@ -51,11 +54,15 @@ def run_mission(
     router_endpoint: str | None = None,
     stall_timeout_s: float = 120.0,
     console: Console | None = None,
+    sample_every_s: float = 5.0,
 ) -> RunResult:
-    """Start router (unless given), edge, agents and simulator; run; write the run folder."""
+    """Start router (unless given), edge, agents and simulator; run; write the run folder.
+
+    `sample_every_s`: sim-time period of the live coverage samples (0 = final map only)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     group = ProcessGroup(out_dir / "logs")
     wall_start = time.monotonic()
+    probe = probe_for(config.sim)  # before the services start: a cold ground truth takes seconds
     try:
         if router_endpoint is None:
             router_endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
@@ -64,10 +71,22 @@ def run_mission(
         write_config(config, out_dir / "config.yaml")
         with connect(config.bus) as bus:
             monitor = Monitor(bus, config.sim.robots)
+            sampler = CoverageSampler(monitor, probe, sample_every_s, config.sim.tick_s)
             start_services(group, out_dir / "config.yaml", config.sim.robots)
-            completed = _watch(monitor, group, config, stall_timeout_s, console)
+            sampler.start()
+            try:
+                completed = _watch(monitor, group, config, stall_timeout_s, console)
+            finally:
+                sampler.stop()
+            if completed:
+                _halt(group, "sim")
             wall_s = time.monotonic() - wall_start
-            metrics = write_run_folder(out_dir, config, monitor, completed, wall_s)
+            cloud = fetch_cloud(bus)
+            if cloud is None:
+                raise MissionError("the edge did not answer the final map/cloud query")
+            _catch_up(monitor, cloud.tick)
+            live = _live_fields(config, monitor, completed, wall_s, sample_every_s)
+            metrics = write_run_folder(out_dir, config, monitor, sampler, cloud, live, probe)
     finally:
         codes = group.stop(order=["sim", "edge"])
     return RunResult(out_dir, metrics, codes)
@@ -106,10 +125,58 @@ def _watch(
             if not console.is_terminal and now >= next_log:
                 log.info("sim %.1f/%.0f s  %s", monitor.sim_time_s, cap_s, status)
                 next_log = now + 5.0
-            if monitor.frontiers is not None and monitor.frontiers.complete:
+            if monitor.complete_tick is not None:
                 return True
             if monitor.sim_time_s >= cap_s - 0.5 * config.sim.tick_s:
                 return False
+
+
+def _halt(group: ProcessGroup, name: str, grace_s: float = 10.0) -> None:
+    """Stop one child (SIGTERM, then SIGKILL): the simulator once the edge declared the
+    exploration complete, so the map stops growing before the final query."""
+    proc = group.children.get(name)
+    if proc is None or proc.poll() is not None:
+        return
+    proc.terminate()
+    try:
+        proc.wait(timeout=grace_s)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait(timeout=grace_s)
+
+
+def _catch_up(monitor: Monitor, edge_tick: int, timeout_s: float = 3.0) -> None:
+    """Read the monitor's inbox until it holds the edge's grid of the final map's tick, so
+    the grid written and scored belongs to the same edge tick as the final cloud."""
+    deadline = time.monotonic() + timeout_s
+    while edge_tick not in monitor.recent_grids and time.monotonic() < deadline:
+        monitor.pump(timeout=0.05)
+    if monitor.recent_grids.get(edge_tick) is not None:
+        monitor.grid = monitor.recent_grids[edge_tick]
+
+
+def _live_fields(
+    config: SpacemapConfig, monitor: Monitor, completed: bool, wall_s: float,
+    sample_every_s: float,
+) -> dict[str, object]:
+    """What only the live run knows (live.json): completion, sim and wall time, traffic."""
+    tick_s = config.sim.tick_s
+    if completed and monitor.complete_tick is not None:
+        sim_s = round(monitor.complete_tick * tick_s, 6)
+    else:
+        sim_s = round(min(monitor.sim_time_s, config.sim.max_sim_time_s), 6)
+    per_s = max(sim_s, 1e-9)
+    return {
+        "completed": completed,
+        "mapping_time_s": sim_s if completed else None,
+        "sim_time_s": sim_s,
+        "wall_time_s": wall_s,
+        "bytes_per_robot": {
+            str(r): {"total": b, "per_sim_s": b / per_s}
+            for r, b in monitor.bytes_per_robot().items()
+        },
+        "sample_every_s": sample_every_s,
+    }
 
 
 def _status_line(monitor: Monitor) -> str:

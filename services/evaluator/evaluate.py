@@ -1,0 +1,105 @@
+"""`spacemap eval`: recompute metrics.json from the files of a finished run folder."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from schemas import messages as m
+from services.common.config import SpacemapConfig
+from services.evaluator import run_files as rf
+from services.evaluator.scoring import Probe, score
+from services.evaluator.world_truth import eval_config_for, world_ground_truth
+from services.simulator.config import SimConfig
+
+log = logging.getLogger(__name__)
+
+
+def probe_for(sim: SimConfig) -> Probe:
+    """Ground truth (cached on disk) of the run's world and spawn poses."""
+    return Probe(world_ground_truth(sim), eval_config_for(sim))
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """The parts of a run's config.yaml the evaluator needs. Read leniently: a run folder
+    stays evaluable when a service's config section gains or loses fields later."""
+
+    sim: SimConfig
+    planner: str
+    drf: bool
+
+    @classmethod
+    def of(cls, config: SpacemapConfig) -> RunConfig:
+        return cls(config.sim, config.edge.planner, config.agent.drf)
+
+    @classmethod
+    def read(cls, path: Path) -> RunConfig:
+        tree = yaml.safe_load(path.read_text()) or {}
+        sim = {k: v for k, v in tree.get("sim", {}).items() if k in SimConfig.model_fields}
+        return cls(SimConfig.model_validate(sim), tree.get("edge", {}).get("planner", "space"),
+                   bool(tree.get("agent", {}).get("drf", True)))
+
+    def identity(self) -> dict[str, Any]:
+        return {"robots": self.sim.robots, "world": self.sim.world, "planner": self.planner,
+                "drf": self.drf, "seed": self.sim.seed}
+
+
+def load_tracks(run_dir: Path, robots: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(stamps_s, xy) of each robot's ground-truth trajectory."""
+    out = []
+    for robot in range(robots):
+        stamps, xyyaw = rf.read_tum(rf.gt_trajectory_path(run_dir, robot))
+        out.append((stamps, xyyaw[:, :2]))
+    return out
+
+
+def _optional_grid(stem: Path) -> m.OccupancyGrid | None:
+    return rf.read_grid(stem) if stem.with_suffix(".pgm").exists() else None
+
+
+def _robot_grids(run_dir: Path, robots: int) -> list[m.OccupancyGrid] | None:
+    grids = [_optional_grid(rf.robot_grid_stem(run_dir, r)) for r in range(robots)]
+    return None if any(g is None for g in grids) else grids  # type: ignore[return-value]
+
+
+def evaluate_run_folder(run_dir: Path, probe: Probe | None = None) -> dict[str, Any]:
+    """metrics.json's content from the run folder's files (live-only keys from live.json)."""
+    config = RunConfig.read(run_dir / "config.yaml")
+    probe = probe or probe_for(config.sim)
+    robots = config.sim.robots
+    live = rf.read_json(run_dir / rf.LIVE)
+    robot_points = None
+    if live.get("robot_maps_ok", True):
+        robot_points = [rf.read_ply(rf.robot_map_path(run_dir, r)) for r in range(robots)]
+    series = rf.read_csv(run_dir / rf.TIMESERIES)
+    return score(
+        probe,
+        rf.read_ply(run_dir / rf.MERGED_MAP),
+        robot_points,
+        _optional_grid(run_dir / rf.MERGED_GRID),
+        _robot_grids(run_dir, robots),
+        load_tracks(run_dir, robots),
+        [r for r in series if r.get("coverage_3d_pct") is not None],
+        live,
+        config.identity(),
+    )
+
+
+def redraw_plots(run_dir: Path, metrics: dict[str, Any]) -> None:
+    """coverage.png and map_top.png from the run folder's files."""
+    from services.evaluator.plots import plot_coverage, plot_map_top
+
+    config = RunConfig.read(run_dir / "config.yaml")
+    tracks = load_tracks(run_dir, config.sim.robots)
+    frontiers = rf.read_json(run_dir / rf.FRONTIERS)["xy"] if (run_dir / rf.FRONTIERS).exists() \
+        else []
+    label = f"{metrics['world']}, {metrics['robots']} robots, {metrics['planner']}"
+    plot_coverage(rf.read_csv(run_dir / rf.TIMESERIES), run_dir / "coverage.png", label)
+    plot_map_top(rf.read_ply(run_dir / rf.MERGED_MAP), [xy for _, xy in tracks],
+                 np.asarray(frontiers, dtype=np.float64), run_dir / "map_top.png", label)

@@ -1,0 +1,98 @@
+"""PNG figures (matplotlib Agg): coverage over time, the merged map from above, Fig. 5 style
+coverage curves per method."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")  # headless: no display on the evaluation machine
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+MAX_MAP_POINTS = 60_000  # subsample for a readable, fast scatter
+
+
+def _column(rows: Sequence[Mapping[str, Any]], key: str) -> np.ndarray:
+    return np.array([np.nan if r.get(key) is None else r[key] for r in rows], dtype=float)
+
+
+def plot_coverage(rows: Sequence[Mapping[str, Any]], path: Path, title: str = "") -> None:
+    """3D / 2D coverage and 3D overlap (%) over sim time, bounding volume on a second axis."""
+    fig, ax = plt.subplots(figsize=(7, 4), dpi=110)
+    t = _column(rows, "sim_time_s")
+    for key, label in (("coverage_3d_pct", "3D coverage"), ("coverage_2d_pct", "2D coverage"),
+                       ("overlap_3d_pct", "3D overlap")):
+        ax.plot(t, _column(rows, key), marker=".", label=label)
+    ax.set(xlabel="sim time (s)", ylabel="%", ylim=(0, 100), title=title or "coverage over time")
+    ax.grid(alpha=0.3)
+    ax2 = ax.twinx()
+    ax2.plot(t, _column(rows, "bounding_volume_pct"), color="tab:red", ls="--", label="BV %")
+    ax2.set_ylabel("bounding volume (%)", color="tab:red")
+    lines = ax.get_legend_handles_labels()
+    lines2 = ax2.get_legend_handles_labels()
+    ax.legend(lines[0] + lines2[0], lines[1] + lines2[1], loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def plot_map_top(
+    points_world: np.ndarray,
+    trajectories_xy: Sequence[np.ndarray],
+    frontiers_xy: np.ndarray,
+    path: Path,
+    title: str = "",
+) -> None:
+    """The merged map seen from above (colour = height), trajectories and last frontiers."""
+    fig, ax = plt.subplots(figsize=(7, 6), dpi=110)
+    pts = np.asarray(points_world).reshape(-1, 3)
+    if len(pts) > MAX_MAP_POINTS:
+        pts = pts[np.random.default_rng(0).choice(len(pts), MAX_MAP_POINTS, replace=False)]
+    order = np.argsort(pts[:, 2])  # high points drawn last, as seen from above
+    sc = ax.scatter(pts[order, 0], pts[order, 1], c=pts[order, 2], s=0.5, cmap="viridis")
+    if len(pts):
+        fig.colorbar(sc, ax=ax, label="z (m)", shrink=0.8)
+    for robot, xy in enumerate(trajectories_xy):
+        if len(xy):
+            ax.plot(xy[:, 0], xy[:, 1], lw=1.5, label=f"robot {robot}")
+            ax.plot(xy[0, 0], xy[0, 1], "k^", ms=5)
+    fxy = np.asarray(frontiers_xy).reshape(-1, 2)
+    if len(fxy):
+        ax.plot(fxy[:, 0], fxy[:, 1], "rx", ms=6, label="frontiers")
+    ax.set(xlabel="x (m)", ylabel="y (m)", title=title or "merged map from above")
+    ax.set_aspect("equal")
+    ax.legend(loc="upper right", fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def plot_methods_coverage(
+    curves: Mapping[str, Sequence[tuple[np.ndarray, np.ndarray]]],
+    path: Path,
+    title: str = "",
+    key_label: str = "3D coverage (%)",
+) -> None:
+    """Fig. 5 style: mean coverage over sim time per method (band = ± std over seeds)."""
+    fig, ax = plt.subplots(figsize=(7, 4), dpi=110)
+    for method, runs in curves.items():
+        runs = [(t, c) for t, c in runs if len(t)]
+        if not runs:
+            continue
+        end = max(float(t[-1]) for t, _ in runs)
+        grid = np.linspace(0.0, end, 200)
+        # step-hold each run's last value: a finished mission keeps its coverage
+        stack = np.array([np.interp(grid, t, c, left=0.0) for t, c in runs])
+        mean, std = stack.mean(axis=0), stack.std(axis=0)
+        (line,) = ax.plot(grid, mean, label=f"{method} (n={len(runs)})")
+        ax.fill_between(grid, mean - std, mean + std, color=line.get_color(), alpha=0.2)
+    ax.set(xlabel="sim time (s)", ylabel=key_label, ylim=(0, 100), title=title)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

@@ -1,0 +1,160 @@
+"""metrics.json from a run's maps, grids, trajectories and time series (SPEC §5, §7).
+
+One function scores both the live run (`spacemap run`) and a finished run folder
+(`spacemap eval`), so the two agree by construction; `Probe` holds the ground truth's
+KD-trees so that the live coverage time series stays cheap.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from schemas import messages as m
+from services.common import voxels
+from services.common.grid import GridSpec
+from services.evaluator import metrics as mx
+from services.evaluator.config import EvalConfig
+from services.evaluator.ground_truth import GroundTruth
+
+# Live-only fields: measured while the mission ran, copied from live.json by `spacemap eval`.
+LIVE_KEYS = ("mapping_time_s", "bytes_per_robot", "sim_time_s", "wall_time_s", "completed")
+
+
+def grid_spec(grid: m.OccupancyGrid) -> GridSpec:
+    H, W = grid.cells.shape
+    return GridSpec(grid.origin_x, grid.origin_y, grid.resolution_m, H, W)
+
+
+@dataclass
+class Probe:
+    """Ground truth plus its KD-trees, built once per run."""
+
+    gt: GroundTruth
+    ev: EvalConfig
+    _surface_tree: cKDTree | None = field(default=None, repr=False)
+
+    @property
+    def surface_tree(self) -> cKDTree:
+        if self._surface_tree is None:
+            self._surface_tree = cKDTree(self.gt.surface_points_world)
+        return self._surface_tree
+
+    def surface_distance(self, points_world: np.ndarray) -> np.ndarray:
+        """(N,) distance of each point to the nearest static surface sample."""
+        if len(points_world) == 0:
+            return np.zeros(0)
+        dist, _ = self.surface_tree.query(points_world)
+        return dist
+
+    def ghost_point_mask(
+        self, points_world: np.ndarray, dist: np.ndarray
+    ) -> tuple[np.ndarray, int, int]:
+        """(per-point ghost mask, ghost voxels, occupied voxels): a voxel is a ghost when
+        every one of its points lies > ghost_dist from every static surface point."""
+        if len(points_world) == 0:
+            return np.zeros(0, dtype=bool), 0, 0
+        keys = voxels.pack(voxels.voxel_indices(points_world, self.ev.voxel_m))
+        uniq, inverse = np.unique(keys, return_inverse=True)
+        near = np.zeros(len(uniq), dtype=bool)
+        near[inverse[dist <= self.ev.ghost_dist_m]] = True  # one near point clears the voxel
+        return ~near[inverse], int((~near).sum()), len(uniq)
+
+    def covered(self, points_world: np.ndarray) -> np.ndarray:
+        """(N_observable,) bool: observable truth points with a map point within radius."""
+        return mx.covered_mask(
+            points_world, self.gt.observable_points_world, self.ev.coverage_radius_m
+        )
+
+    def coverage_2d(self, grid: m.OccupancyGrid | None) -> float | None:
+        if grid is None:
+            return None
+        fg = self.gt.free_grid
+        return mx.coverage_2d(grid.cells >= 0, grid_spec(grid), fg.free, fg.spec)
+
+    def overlap_2d(self, grids: Sequence[m.OccupancyGrid] | None) -> float | None:
+        if not grids:
+            return None
+        fg = self.gt.free_grid
+        return mx.overlap_2d([(g.cells >= 0, grid_spec(g)) for g in grids], fg.free, fg.spec)
+
+
+def overlap_from_masks(masks: Sequence[np.ndarray]) -> float | None:
+    """% of covered truth points covered by two or more robots (None without robots)."""
+    if not masks:
+        return None
+    counts = np.sum([mk.astype(np.int32) for mk in masks], axis=0)
+    covered = int((counts >= 1).sum())
+    return 100.0 * int((counts >= 2).sum()) / covered if covered else 0.0
+
+
+def map_quality(
+    probe: Probe, points_world: np.ndarray, robot_points: Sequence[np.ndarray] | None
+) -> dict[str, float | None]:
+    """3D coverage (ghost points excluded), overlap, RMSE, BV and ghost volume of one map."""
+    pts = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
+    dist = probe.surface_distance(pts)
+    ghost, n_ghost, n_occupied = probe.ghost_point_mask(pts, dist)
+    total = len(probe.gt.observable_points_world)
+    cov = 100.0 * probe.covered(pts[~ghost]).sum() / total if total else 0.0
+    overlap = None
+    if robot_points is not None:
+        overlap = overlap_from_masks([probe.covered(p) for p in robot_points])
+    return {
+        "coverage_3d_pct": float(cov),
+        "overlap_3d_pct": overlap,
+        "rmse_3d_cm": float(np.sqrt(np.mean(dist**2)) * 100.0) if len(pts) else None,
+        "bounding_volume_pct": 100.0 * n_ghost / n_occupied if n_occupied else 0.0,
+        "ghost_volume_m3": n_ghost * probe.ev.voxel_m**3,
+    }
+
+
+def distance_at(
+    times_s: np.ndarray, tracks: Sequence[tuple[np.ndarray, np.ndarray]]
+) -> list[float]:
+    """Summed ground-truth path length of all robots up to each time in `times_s`.
+
+    tracks: (stamps_s (T,), xy (T, 2)) per robot."""
+    out = np.zeros(len(times_s))
+    for stamps, xy in tracks:
+        if len(xy) < 2:
+            continue
+        cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
+        idx = np.searchsorted(stamps, np.asarray(times_s) + 1e-9, side="right") - 1
+        out += np.where(idx >= 0, cum[np.clip(idx, 0, None)], 0.0)
+    return [float(v) for v in out]
+
+
+def score(
+    probe: Probe,
+    merged_points_world: np.ndarray,
+    robot_points: Sequence[np.ndarray] | None,
+    merged_grid: m.OccupancyGrid | None,
+    robot_grids: Sequence[m.OccupancyGrid] | None,
+    tracks: Sequence[tuple[np.ndarray, np.ndarray]],
+    series: Sequence[dict[str, Any]],
+    live: dict[str, Any],
+    identity: dict[str, Any],
+) -> dict[str, Any]:
+    """Every SPEC §7 key. `series` rows need sim_time_s and coverage_3d_pct (T90/T99);
+    `live` holds LIVE_KEYS; `identity` holds robots, world, planner, drf, seed."""
+    quality = map_quality(probe, merged_points_world, robot_points)
+    times = np.array([r["sim_time_s"] for r in series], dtype=np.float64)
+    cov = np.array([r["coverage_3d_pct"] for r in series], dtype=np.float64)
+    return mx.assemble_metrics(
+        coverage_3d_pct=quality["coverage_3d_pct"],
+        coverage_2d_pct=probe.coverage_2d(merged_grid),
+        overlap_3d_pct=quality["overlap_3d_pct"],
+        overlap_2d_pct=probe.overlap_2d(robot_grids),
+        rmse_3d_cm=quality["rmse_3d_cm"],
+        bounding_volume_pct=quality["bounding_volume_pct"],
+        t90_s=mx.t_at_coverage(times, cov, 90.0),
+        t99_s=mx.t_at_coverage(times, cov, 99.0),
+        total_distance_m=sum(mx.path_length(xy) for _, xy in tracks),
+        **{k: live.get(k) for k in LIVE_KEYS},
+        **identity,
+    )

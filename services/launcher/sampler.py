@@ -1,0 +1,138 @@
+"""Live queries of the edge's maps: final per-robot clouds and grids, and a coverage time
+series sampled from the merged cloud every few sim seconds on a background thread.
+
+In lockstep the simulator does not wait for the launcher, so a sample is stamped with the
+tick the edge had reached when it answered (Cloud.tick), not the tick that was asked for.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Any
+
+import numpy as np
+
+from schemas import messages as m
+from schemas.codec import DecodeError
+from services.common.bus import Bus
+from services.evaluator.scoring import Probe, map_quality
+from services.launcher.monitor import Monitor
+
+log = logging.getLogger(__name__)
+
+SAMPLE_TIMEOUT_S = 10.0
+FINAL_TIMEOUT_S = 30.0
+
+
+def fetch_cloud(bus: Bus, robot_id: int = -1, timeout: float = FINAL_TIMEOUT_S) -> m.Cloud | None:
+    """The merged cloud P* (robot_id -1) or one robot's own map; None when no reply."""
+    try:
+        reply = bus.query(bus.keys.map_cloud(), m.CloudRequest(robot_id=robot_id), m.Cloud,
+                          timeout=timeout)
+    except (TimeoutError, DecodeError) as exc:
+        log.warning("map/cloud robot_id=%d: no usable reply (%s)", robot_id, exc)
+        return None
+    assert isinstance(reply, m.Cloud)
+    return reply
+
+
+def fetch_robot_grid(bus: Bus, robot_id: int, timeout: float = 5.0) -> m.OccupancyGrid | None:
+    """One robot's own occupancy grid from `map/robot_grid`; None when no reply."""
+    try:
+        reply = bus.query(bus.keys.map_robot_grid(), m.GridRequest(robot_id=robot_id),
+                          m.OccupancyGrid, timeout=timeout)
+    except (TimeoutError, DecodeError) as exc:
+        log.warning("map/robot_grid robot_id=%d: no usable reply (%s); overlap_2d_pct will be "
+                    "null", robot_id, exc)
+        return None
+    assert isinstance(reply, m.OccupancyGrid)
+    return reply
+
+
+def robot_clouds(bus: Bus, merged: m.Cloud, robots: int) -> tuple[list[np.ndarray], str]:
+    """Each robot's own map; where the edge answers with something else (an older edge
+    ignores CloudRequest.robot_id), the merged map's points tagged with that robot."""
+    out, sources = [], set()
+    for robot in range(robots):
+        reply = fetch_cloud(bus, robot)
+        if reply is not None and reply.robot_id == robot:
+            out.append(reply.points_world.astype(np.float64))
+            sources.add("edge per-robot map")
+        else:
+            out.append(merged.points_world[merged.robot_ids == robot].astype(np.float64))
+            sources.add("merged map split by robot_ids")
+    if "merged map split by robot_ids" in sources:
+        log.warning("per-robot clouds: some from the merged map split by robot_ids")
+    return out, " + ".join(sorted(sources))
+
+
+def series_row(probe: Probe, cloud: m.Cloud, grid: m.OccupancyGrid | None, tick_s: float,
+               frontiers: int) -> dict[str, Any]:
+    """One time-series row from the merged cloud (overlap from its per-point robot ids)."""
+    pts = cloud.points_world.astype(np.float64)
+    per_robot = [pts[cloud.robot_ids == r] for r in np.unique(cloud.robot_ids)]
+    quality = map_quality(probe, pts, per_robot)
+    known = int((grid.cells >= 0).sum()) if grid is not None else 0
+    return {
+        "sim_time_s": round(cloud.tick * tick_s, 6),
+        "coverage_3d_pct": quality["coverage_3d_pct"],
+        "coverage_2d_pct": probe.coverage_2d(grid),
+        "overlap_3d_pct": quality["overlap_3d_pct"],
+        "bounding_volume_pct": quality["bounding_volume_pct"],
+        "ghost_volume_m3": quality["ghost_volume_m3"],
+        "known_area_m2": known * grid.resolution_m**2 if grid is not None else 0.0,
+        "frontiers": frontiers,
+        "map_points": len(pts),
+    }
+
+
+class CoverageSampler:
+    """Samples the merged map every `every_s` sim seconds on its own thread."""
+
+    def __init__(self, monitor: Monitor, probe: Probe, every_s: float, tick_s: float) -> None:
+        self.monitor, self.probe, self.every_s, self.tick_s = monitor, probe, every_s, tick_s
+        self.rows: list[dict[str, Any]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="coverage-sampler", daemon=True)
+
+    def start(self) -> None:
+        if self.every_s > 0:
+            self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=SAMPLE_TIMEOUT_S + 30.0)
+
+    def _loop(self) -> None:
+        due = self.every_s
+        while not self._stop.wait(0.05):
+            if self.monitor.sim_time_s < due:
+                continue
+            cloud = fetch_cloud(self.monitor.bus, -1, SAMPLE_TIMEOUT_S)
+            if cloud is not None:
+                self.add(cloud)
+            due = (np.floor(self.monitor.sim_time_s / self.every_s) + 1) * self.every_s
+
+    def _await_edge_tick(self, tick: int, timeout_s: float = 2.0) -> None:
+        """The edge publishes its grid of tick k before it can answer with Cloud(tick=k), but
+        the monitor may not have read it yet: give it a moment, then use the latest grid.
+        Once stopped (the final map, added from the main thread after `_catch_up`), no wait."""
+        deadline = time.monotonic() + timeout_s
+        pause = threading.Event()
+        while (not self._stop.is_set() and tick not in self.monitor.recent_grids
+               and time.monotonic() < deadline):
+            pause.wait(0.02)  # the main thread pumps the monitor meanwhile
+
+    def add(self, cloud: m.Cloud) -> None:
+        """Add a sample (also used for the final map); keeps rows in sim-time order."""
+        self._await_edge_tick(cloud.tick)
+        grid, frontiers = self.monitor.at_tick(cloud.tick)
+        row = series_row(self.probe, cloud, grid, self.tick_s, frontiers)
+        if self.rows and row["sim_time_s"] < self.rows[-1]["sim_time_s"]:
+            return
+        if self.rows and row["sim_time_s"] == self.rows[-1]["sim_time_s"]:
+            self.rows.pop()  # the same edge tick answered twice: keep the newer view
+        self.rows.append(row)

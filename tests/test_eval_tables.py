@@ -1,0 +1,69 @@
+"""Bench tables and figures from synthetic records and time series (no processes)."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from services.evaluator import tables as tb
+from services.evaluator.plots import plot_coverage, plot_map_top, plot_methods_coverage
+
+
+def _records() -> list[dict]:
+    out = []
+    for method, cov, bv in (("standalone", (60.0, 70.0), (2.0, 4.0)),
+                            ("space", (80.0, 90.0), (0.0, 0.02))):
+        for seed, (c, b) in enumerate(zip(cov, bv, strict=True)):
+            out.append({"world_label": "house", "robots": 3, "method": method, "seed": seed,
+                        "coverage_3d_pct": c, "bounding_volume_pct": b, "rmse_3d_cm": 3.0,
+                        "overlap_3d_pct": None if seed else 40.0, "completed": seed == 0})
+    return out
+
+
+def test_mean_std_uses_sample_std_and_skips_nulls() -> None:
+    assert tb.mean_std([1.0, 3.0, None]) == (2.0, np.sqrt(2.0), 2)
+    assert tb.mean_std([None]) == (None, None, 0)
+    assert tb.mean_std([True, False]) == (0.5, np.sqrt(0.5), 2)
+
+
+def test_table_markdown_has_mean_pm_std_per_method() -> None:
+    md = tb.table_markdown(_records(), tb.TABLE1_METHODS, tb.TABLE1_METRICS, "Table I")
+    assert "| metric | standalone | space |" in md
+    assert "| 3D coverage (%) | 65.0 ± 7.1 | 85.0 ± 7.1 |" in md
+    assert "(n=1/2)" in md  # a null overlap is counted, not averaged in
+    assert "2D coverage (%) | n/a | n/a" in md
+    md2 = tb.table_markdown(_records(), ("space",), {"completed": "completed runs"}, "II")
+    assert "| completed runs | 1/2 |" in md2
+
+
+def test_table_csv_long_format(tmp_path: Path) -> None:
+    tb.write_table_csv(tmp_path / "t.csv", _records(), tb.TABLE1_METHODS, tb.TABLE1_METRICS)
+    rows = list(csv.DictReader((tmp_path / "t.csv").open()))
+    cov = [r for r in rows if r["metric"] == "coverage_3d_pct" and r["method"] == "space"]
+    assert len(cov) == 1 and float(cov[0]["mean"]) == 85.0 and cov[0]["n"] == "2"
+
+
+def test_bv_ratio_reports_standalone_over_space() -> None:
+    (line,) = tb.bv_ratio_lines(_records())
+    assert "300.0×" in line
+
+
+def _png_ok(path: Path) -> None:
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert path.stat().st_size > 10_000, "a near-empty figure"
+
+
+def test_plots_are_written(tmp_path: Path) -> None:
+    rng = np.random.default_rng(0)
+    t = np.arange(0.0, 60.0, 5.0)
+    rows = [{"sim_time_s": s, "coverage_3d_pct": s, "coverage_2d_pct": s + 5,
+             "overlap_3d_pct": 30.0, "bounding_volume_pct": 0.1} for s in t]
+    plot_coverage(rows, tmp_path / "cov.png")
+    plot_map_top(rng.uniform(0, 5, (5000, 3)), [rng.uniform(0, 5, (50, 2))],
+                 rng.uniform(0, 5, (4, 2)), tmp_path / "map.png")
+    plot_methods_coverage({"space": [(t, t), (t, t + 5)], "nearest": [(t, t / 2)]},
+                          tmp_path / "fig5.png")
+    for name in ("cov.png", "map.png", "fig5.png"):
+        _png_ok(tmp_path / name)
