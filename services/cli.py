@@ -302,3 +302,62 @@ def bench(
     failed = sum("failed" in r for r in records)
     typer.echo(f"bench folder: {out_dir} ({len(records)} runs, {failed} failed)")
     typer.echo((out_dir / "tables.md").read_text())
+
+
+@app.command()
+def record(
+    out: Annotated[Path, typer.Option("--out", help="run folder to write")],
+    sample_every: Annotated[float, typer.Option(
+        "--sample-every", help="coverage time-series period, sim s (0: final map only)")] = 5.0,
+    config: ConfigOpt = None,
+    connect: ConnectOpt = None,
+    set_: SetOpt = None,
+    log_level: LogOpt = "INFO",
+) -> None:
+    """Watch a mission started elsewhere (other hosts, docker compose); write its run folder."""
+    from services.launcher.run import MissionError, record_mission
+
+    _setup_logging(log_level)
+    try:
+        result = record_mission(service_config(config, connect, set_), out,
+                                sample_every_s=sample_every)
+    except MissionError as exc:
+        typer.echo(f"recording failed: {exc}", err=True)
+        raise typer.Exit(1) from exc
+    typer.echo(f"run folder: {result.out_dir}")
+
+
+@app.command()
+def health(
+    role: Annotated[str, typer.Option("--role", help="router|sim|edge|agent|monitor")],
+    ident: Annotated[str, typer.Option("--id", help="process id (robot id for agents)")] = "0",
+    timeout: Annotated[float, typer.Option("--timeout", help="seconds")] = 3.0,
+    config: ConfigOpt = None,
+    connect: ConnectOpt = None,
+    set_: SetOpt = None,
+) -> None:
+    """Exit 0 when the process is alive on the bus (for health checks), else 1."""
+    from services.common.health import is_alive
+
+    cfg = service_config(config, connect, set_)
+    if not is_alive(cfg.bus, role, ident, timeout):
+        typer.echo(f"{role}/{ident}: not alive on {cfg.bus.connect}", err=True)
+        raise typer.Exit(1)
+    typer.echo(f"{role}/{ident}: alive")
+
+
+@app.command()
+def inventory(
+    robots: Annotated[int, typer.Option("--robots", min=1, help="agents to ask")] = 3,
+    timeout: Annotated[float, typer.Option("--timeout", help="seconds per query")] = 5.0,
+    config: ConfigOpt = None,
+    connect: ConnectOpt = None,
+    set_: SetOpt = None,
+) -> None:
+    """Print, as JSON, the submaps each agent produced and those the edge merged."""
+    import json
+
+    from services.common.inventory import collect_inventories
+
+    cfg = service_config(config, connect, set_)
+    typer.echo(json.dumps(collect_inventories(cfg.bus, robots, timeout), indent=1))

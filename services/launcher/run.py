@@ -61,39 +61,65 @@ def run_mission(
     `sample_every_s`: sim-time period of the live coverage samples (0 = final map only)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     group = ProcessGroup(out_dir / "logs")
-    wall_start = time.monotonic()
-    probe = probe_for(config.sim)  # before the services start: a cold ground truth takes seconds
     try:
         if router_endpoint is None:
             router_endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
             group.start("router", spacemap_command("router", "--listen", router_endpoint))
         config = _with_endpoint(config, router_endpoint)
-        write_config(config, out_dir / "config.yaml")
-        with connect(config.bus) as bus:
-            monitor = Monitor(bus, config.sim.robots)
-            sampler = CoverageSampler(monitor, probe, sample_every_s, config.sim.tick_s)
-            start_services(group, out_dir / "config.yaml", config.sim.robots)
-            sampler.start()
-            try:
-                completed = _watch(monitor, group, config, stall_timeout_s, console)
-            finally:
-                sampler.stop()
-            if completed:
-                _halt(group, "sim")
-            wall_s = time.monotonic() - wall_start
-            cloud = fetch_cloud(bus)
-            if cloud is None:
-                raise MissionError("the edge did not answer the final map/cloud query")
-            _catch_up(monitor, cloud.tick)
-            live = _live_fields(config, monitor, completed, wall_s, sample_every_s)
-            metrics = write_run_folder(out_dir, config, monitor, sampler, cloud, live, probe)
+        metrics = _record(config, out_dir, group, stall_timeout_s, console, sample_every_s)
     finally:
         codes = group.stop(order=["sim", "edge"])
     return RunResult(out_dir, metrics, codes)
 
 
+def record_mission(
+    config: SpacemapConfig,
+    out_dir: Path,
+    stall_timeout_s: float = 600.0,
+    console: Console | None = None,
+    sample_every_s: float = 5.0,
+) -> RunResult:
+    """Watch a mission whose services run elsewhere (other hosts, docker compose) and write
+    its run folder when it completes or reaches the sim-time cap; starts nothing."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    metrics = _record(config, out_dir, None, stall_timeout_s, console, sample_every_s)
+    return RunResult(out_dir, metrics, {})
+
+
+def _record(
+    config: SpacemapConfig,
+    out_dir: Path,
+    group: ProcessGroup | None,
+    stall_timeout_s: float,
+    console: Console | None,
+    sample_every_s: float,
+) -> dict[str, object]:
+    wall_start = time.monotonic()
+    probe = probe_for(config.sim)  # before the services start: a cold ground truth takes seconds
+    write_config(config, out_dir / "config.yaml")
+    with connect(config.bus) as bus:
+        monitor = Monitor(bus, config.sim.robots)
+        sampler = CoverageSampler(monitor, probe, sample_every_s, config.sim.tick_s)
+        if group is not None:
+            start_services(group, out_dir / "config.yaml", config.sim.robots)
+        sampler.start()
+        try:
+            completed = _watch(monitor, group, config, stall_timeout_s, console)
+        finally:
+            sampler.stop()
+        if completed and group is not None:
+            _halt(group, "sim")
+        wall_s = time.monotonic() - wall_start
+        cloud = fetch_cloud(bus)
+        if cloud is None:
+            raise MissionError("the edge did not answer the final map/cloud query")
+        _catch_up(monitor, cloud.tick)
+        live = _live_fields(config, monitor, completed, wall_s, sample_every_s)
+        return write_run_folder(out_dir, config, monitor, sampler, cloud, live, probe)
+
+
 def _watch(
-    monitor: Monitor, group: ProcessGroup, config: SpacemapConfig, stall_timeout_s: float,
+    monitor: Monitor, group: ProcessGroup | None, config: SpacemapConfig, stall_timeout_s: float,
     console: Console | None,
 ) -> bool:
     """Until exploration completes (True) or the sim-time cap is reached (False)."""
@@ -111,7 +137,9 @@ def _watch(
         task = bar.add_task("mission", total=cap_s, status="starting")
         while True:
             monitor.pump(timeout=0.2)
-            dead = {n: c for n, c in group.dead().items() if n != "router" or c != 0}
+            dead = {} if group is None else {
+                n: c for n, c in group.dead().items() if n != "router" or c != 0
+            }
             if dead:
                 raise MissionError(f"service(s) exited: {dead}; see {group.log_dir}")
             tick = monitor.clock.tick if monitor.clock else -1

@@ -25,6 +25,7 @@ from schemas.messages import (
     Correction,
     Goal,
     GoalStatus,
+    Inventory,
     Message,
     OccupancyGrid,
     Odometry,
@@ -34,6 +35,7 @@ from schemas.messages import (
     Submap,
 )
 from services.common.geometry import T_from_xyyaw, invert, transform_points, xyyaw_from_T
+from services.common.inventory import inventory_of
 from services.robot_agent.awareness import in_view_partial, visible_paper
 from services.robot_agent.config import AgentConfig
 from services.robot_agent.drf import DrfParams, filter_mask
@@ -134,6 +136,13 @@ class AgentCore:
     def on_pose(self, pose: RobotPose) -> None:
         if pose.robot_id != self.robot_id:
             self.teammates[pose.robot_id] = pose
+
+    def inventory(self, tick: int) -> Inventory:
+        """The submaps this agent process produced and published (issue 7's nothing-lost
+        check compares it with the edge's)."""
+        epoch = self.epoch or 0
+        items = [(epoch, sid, n) for sid, n in self.mapper.published() if n > 0]
+        return inventory_of({self.robot_id: items}, tick)
 
     def on_edge_presence(self, alive: bool) -> None:
         """The edge's liveliness token appeared (True) or went (False)."""

@@ -193,6 +193,11 @@ class KeyframeMapper:
             return None
         return self.current.take_delta(self.config.voxel_m, self.config.color_resend)
 
+    def published(self) -> list[tuple[int, int]]:
+        """(submap id, voxels sent at least once) of every submap, oldest first."""
+        subs = [*self.done, *([self.current] if self.current is not None else [])]
+        return [(sub.submap_id, int((sub.sent_counts > 0).sum())) for sub in subs]
+
     def resend_all(self) -> list[SubmapDelta]:
         """Every submap in full, oldest first (after the edge came back)."""
         out = []

@@ -9,6 +9,7 @@ import threading
 from schemas.messages import (
     Correction,
     Goal,
+    Inventory,
     OccupancyGrid,
     Odometry,
     RgbdFrame,
@@ -81,12 +82,23 @@ def main(config: SpacemapConfig, robot_id: int) -> None:
     _install_stop_handlers(stop)
     core = AgentCore(config.agent, robot_id, config.sim.tick_s)
     with connect(config.bus) as bus:
+        lock = threading.Lock()  # the inventory queryable runs on a zenoh thread
+        last_tick = [0]
+
+        def answer_inventory(_body: bytes) -> Inventory:
+            with lock:
+                return core.inventory(last_tick[0])
+
         _subscribe(bus, robot_id)
+        bus.serve(bus.keys.inventory(robot_id), answer_inventory)
         bus.watch_liveliness()  # the edge going and coming back (issue 7)
         bus.declare_alive("agent", robot_id)
         log.info("agent %d up on %s", robot_id, config.bus.connect)
         while not stop.is_set():
             item = bus.poll(timeout=POLL_S)
             if item is not None:
-                handle(bus, core, item, config.sim.tick_s)
+                with lock:
+                    handle(bus, core, item, config.sim.tick_s)
+                if isinstance(item, Inbound) and isinstance(item.message, Odometry):
+                    last_tick[0] = item.message.tick
     log.info("agent %d stopped", robot_id)
