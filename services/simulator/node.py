@@ -24,6 +24,7 @@ from schemas.messages import (  # noqa: E402
     Clock,
     CmdVel,
     EdgeAck,
+    Frontiers,
     GtPose,
     Odometry,
     Pose2D,
@@ -62,6 +63,8 @@ class SimNode:
         self.dt_ns = round(cfg.tick_s * 1e9)
         bus.subscribe(self.keys.any_robot("cmd_vel"), CmdVel)
         bus.subscribe(self.keys.edge_ack(), EdgeAck)
+        bus.subscribe(self.keys.map_frontiers(), Frontiers)
+        self.complete_tick: int | None = None  # the edge declared exploration complete
         bus.watch_liveliness()
         bus.declare_alive("sim", 0)
 
@@ -75,6 +78,9 @@ class SimNode:
                 self._cmd_vel(item.key, msg)
             elif isinstance(msg, EdgeAck) and msg.tick == self.sim.tick:
                 self.edge_acked = True
+            elif isinstance(msg, Frontiers) and msg.complete and self.complete_tick is None:
+                # Read before the EdgeAck of the same tick: the stop tick is deterministic.
+                self.complete_tick = msg.tick
 
     def _presence(self, p: Presence) -> None:
         if p.role == "edge":
@@ -201,6 +207,9 @@ class SimNode:
                 self._pace(next_wall)
                 next_wall = self._next_deadline(next_wall, period_s)
             self.timing["wait"] += time.perf_counter() - t0
+            if self.complete_tick is not None:
+                log.info("exploration complete at tick %d: the clock stops", self.complete_tick)
+                break
             t0 = time.perf_counter()
             self.sim.step({i: c for i, c in self.commands.items() if i in self.live_agents})
             self.timing["step"] += time.perf_counter() - t0
