@@ -27,6 +27,7 @@ from services.common.planning import inflate
 from services.edge_server.config import EdgeConfig
 from services.edge_server.frontiers import detect_frontiers
 from services.edge_server.planner import EdgePlanner, robot_fields
+from services.edge_server.spatial_frontiers import detect_spatial_frontiers
 
 V = 0.05
 W_M, H_M, WALL_H = 16.0, 12.0, 2.5
@@ -159,9 +160,14 @@ def main() -> None:
         ("  inflate", median_ms(lambda: inflate(snap.occupied, 4), args.repeats)),
         ("  distance fields (3 robots)",
          median_ms(lambda: robot_fields(traversable, starts, 20.0), args.repeats)),
-        ("  frontiers + goals f′",
+        ("  2D grid frontiers + goals f′ (nearest/utility)",
          median_ms(lambda: detect_frontiers(snap.free, snap.known, reach, snap.spec, cfg),
                    args.repeats)),
+        ("  3D F_u/F_w regions + gains + goals f′ (space)",
+         median_ms(lambda: detect_spatial_frontiers(planner.merged, snap.known, reach, snap.spec,
+                                                    cfg), args.repeats)),
+        ("  map merger update (nothing new)",
+         median_ms(lambda: planner.merger.update(planner.store), args.repeats)),
     ]
     print(f"\nmerged map: {len(planner.merged)} voxels; grid {snap.spec.height}×{snap.spec.width}"
           f" cells; {len(out.frontiers.frontiers)} frontiers; assigned {out.frontiers.assigned}\n")

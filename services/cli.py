@@ -71,13 +71,16 @@ def router(
     listen: Annotated[
         list[str] | None, typer.Option("--listen", help="endpoint(s) to listen on")
     ] = None,
+    lease: Annotated[
+        float, typer.Option("--lease", help="seconds before a silent peer is gone")
+    ] = 10.0,
     log_level: LogOpt = "INFO",
 ) -> None:
     """Run the zenoh router (mode router)."""
     from services.common.router import run_router
 
     _setup_logging(log_level)
-    run_router(listen or ["tcp/0.0.0.0:7447"], install_stop_handlers())
+    run_router(listen or ["tcp/0.0.0.0:7447"], install_stop_handlers(), lease)
 
 
 @app.command()

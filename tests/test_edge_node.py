@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 
 from schemas import DecodeError, Keys, encode
-from schemas.messages import Clock, CloudRequest, EdgeAck, Frontiers, Goal, OccupancyGrid
+from schemas.messages import (
+    Clock,
+    CloudRequest,
+    EdgeAck,
+    Frontiers,
+    Goal,
+    GridRequest,
+    OccupancyGrid,
+)
 from services.common.bus import Inbound, Presence
 from services.common.config import SpacemapConfig
 from services.edge_server.node import EdgeNode
@@ -54,3 +62,19 @@ def test_cloud_reply() -> None:
     assert len(node.serve_cloud(encode(CloudRequest())).points_world) == len(cloud.points_world)
     with pytest.raises(DecodeError):
         node.serve_cloud(b"garbage")
+
+
+def test_robot_cloud_and_robot_grid_queries() -> None:
+    node = EdgeNode(FakeBus(), SpacemapConfig())  # type: ignore[arg-type]
+    node.planner = corridor_planner()
+    node.handle(Inbound("spacemap/robot/0/pose", pose(0, 0.5)))
+    node.handle(clock(10))
+    own = node.serve_cloud(encode(CloudRequest(robot_id=0)))
+    assert own.robot_id == 0 and len(own.points_world) == len(node.serve_cloud(b"").points_world)
+    assert len(node.serve_cloud(encode(CloudRequest(robot_id=3))).points_world) == 0
+    grid = node.serve_robot_grid(encode(GridRequest(robot_id=0)))
+    merged = node.planner.last_grid
+    assert merged is not None and grid.cells.shape == merged.cells.shape
+    assert np.array_equal(grid.cells, merged.cells)  # one robot: its grid is the merged grid
+    other = node.serve_robot_grid(encode(GridRequest(robot_id=1)))
+    assert (other.cells == -1).all()

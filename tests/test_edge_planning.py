@@ -54,7 +54,7 @@ def test_tiny_clusters_dropped_and_goals_only_on_allowed_cells() -> None:
 
 def corridor_planner(config: EdgeConfig | None = None) -> EdgePlanner:
     """A 4 m × 0.5 m corridor along x at y 1.0..1.5, walled along y, open (unknown) at both ends."""
-    planner = EdgePlanner(config or EdgeConfig(), tick_s=0.1)
+    planner = EdgePlanner(config or EdgeConfig(planner="nearest"), tick_s=0.1)
     cols, rows = np.meshgrid(np.arange(0, 80), np.arange(20, 30))
     free = np.stack([cols.ravel(), rows.ravel()], axis=1)
     walls = [[i, j, k] for i in range(-2, 82) for j in (18, 19, 30, 31) for k in (2, 4)]
@@ -86,7 +86,7 @@ def test_no_frontier_assigned_twice_and_goals_reachable() -> None:
 
 
 def test_hysteresis_keeps_goals_and_blacklist_sets_aside() -> None:
-    planner = corridor_planner(EdgeConfig(blacklist_ticks=50))
+    planner = corridor_planner(EdgeConfig(planner="nearest", blacklist_ticks=50))
     planner.on_pose(pose(0, 1.5))
     first = planner.plan(10).goals
     assert len(first) == 1 and first[0].x < 1.0
@@ -130,7 +130,7 @@ def test_completion_logic() -> None:
 
 
 def test_closed_room_completes_and_open_one_does_not() -> None:
-    planner = EdgePlanner(EdgeConfig(), tick_s=0.1)
+    planner = EdgePlanner(EdgeConfig(planner="nearest"), tick_s=0.1)
     cols, rows = np.meshgrid(np.arange(0, 40), np.arange(0, 40))
     free = np.stack([cols.ravel(), rows.ravel()], axis=1)
     walls = [[i, j, 3] for i in range(-1, 41) for j in range(-1, 41)

@@ -40,6 +40,9 @@ class BusConfig(BaseModel):
     shared_memory: bool = Field(default=False, description="zenoh SHM; never needed")
     max_array_bytes: int = Field(default=DEFAULT_MAX_ARRAY_BYTES, gt=0)
     connect_timeout_s: float = Field(default=30.0, gt=0)
+    lease_s: float = Field(
+        default=10.0, gt=0, description="a silent peer is declared gone after this long"
+    )
 
 
 def zenoh_config(
@@ -48,6 +51,7 @@ def zenoh_config(
     listen: list[str] | None = None,
     shared_memory: bool = False,
     connect_timeout_s: float = 30.0,
+    lease_s: float = 10.0,
 ) -> zenoh.Config:
     """The one set of session flags every spacemap process uses."""
     conf = zenoh.Config()
@@ -55,6 +59,7 @@ def zenoh_config(
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("scouting/gossip/enabled", "false")
     conf.insert_json5("transport/shared_memory/enabled", json.dumps(shared_memory))
+    conf.insert_json5("transport/link/tx/lease", json.dumps(int(lease_s * 1000)))
     if connect:
         conf.insert_json5("connect/endpoints", json.dumps(connect))
         conf.insert_json5("connect/timeout_ms", json.dumps(int(connect_timeout_s * 1000)))
@@ -73,6 +78,7 @@ def open_session(config: BusConfig) -> Iterator[zenoh.Session]:
             connect=[config.connect],
             shared_memory=config.shared_memory,
             connect_timeout_s=config.connect_timeout_s,
+            lease_s=config.lease_s,
         )
     )
     try:

@@ -1,8 +1,9 @@
 """Pluggable frontier scoring and a one-robot-per-frontier greedy assignment.
 
 A `Scorer` turns path lengths (robots × frontiers) into scores, higher is better; a registry
-keyed by `EdgeConfig.planner` picks one. Only "nearest" (Yamauchi: shortest path) exists so
-far; "space", "utility" and "rrt" use it until their own scorers land.
+keyed by `EdgeConfig.planner` picks one: "nearest" (Yamauchi: shortest path), "utility"
+(explore_lite: gain_scale·size − potential_scale·path, greedy), "rrt" (rrt_exploration's
+frontiers, scored like "utility") and "space" (revenue U = I_t·I_g / (κ·h)).
 """
 
 from __future__ import annotations
@@ -13,7 +14,9 @@ from typing import Protocol
 
 import numpy as np
 
+from services.edge_server.config import EdgeConfig
 from services.edge_server.frontiers import FrontierSet
+from services.edge_server.importance import revenue
 
 log = logging.getLogger(__name__)
 
@@ -35,17 +38,48 @@ class NearestScorer:
         return -path_m
 
 
-SCORERS: dict[str, Callable[[], Scorer]] = {"nearest": NearestScorer}
-PLACEHOLDERS = {"space": "nearest", "utility": "nearest", "rrt": "nearest"}
+class UtilityScorer:
+    """explore_lite's greedy cost, negated: gain_scale·frontier size (m) − potential·path (m)."""
+
+    name = "utility"
+
+    def __init__(self, config: EdgeConfig) -> None:
+        self.gain_scale = config.utility_gain_scale
+        self.potential_scale = config.utility_potential_scale
+        self.resolution_m = config.grid_resolution_m
+
+    def score(self, path_m: np.ndarray, frontiers: FrontierSet) -> np.ndarray:
+        size_m = frontiers.sizes * self.resolution_m
+        return self.gain_scale * size_m[None, :] - self.potential_scale * path_m
 
 
-def make_scorer(planner: str) -> Scorer:
-    """The scorer registered for `planner` (or its stand-in until it is implemented)."""
-    if planner in SCORERS:
-        return SCORERS[planner]()
-    stand_in = PLACEHOLDERS[planner]
-    log.info("planner %r not implemented yet: scoring with %r", planner, stand_in)
-    return SCORERS[stand_in]()
+class SpaceScorer:
+    """The paper's revenue U(r_i, f′) = I_t(f)·I_g(f) / (κ·h(p_i, p_f′))."""
+
+    name = "space"
+
+    def __init__(self, config: EdgeConfig) -> None:
+        self.kappa = config.revenue_kappa
+        self.min_path_m = config.revenue_min_path_m
+
+    def score(self, path_m: np.ndarray, frontiers: FrontierSet) -> np.ndarray:
+        n = len(frontiers)
+        gain = frontiers.gain if frontiers.gain is not None else np.ones(n)
+        imp = frontiers.importance if frontiers.importance is not None else np.ones(n)
+        return revenue(imp, gain, path_m, self.kappa, self.min_path_m)
+
+
+SCORERS: dict[str, Callable[[EdgeConfig], Scorer]] = {
+    "nearest": lambda _config: NearestScorer(),
+    "utility": UtilityScorer,
+    "rrt": UtilityScorer,
+    "space": SpaceScorer,
+}
+
+
+def make_scorer(planner: str, config: EdgeConfig | None = None) -> Scorer:
+    """The scorer registered for `planner`."""
+    return SCORERS[planner](config or EdgeConfig())
 
 
 def greedy_match(scores: np.ndarray) -> dict[int, int]:

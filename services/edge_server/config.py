@@ -33,6 +33,35 @@ class EdgeConfig(BaseModel):
         default=1.0, ge=0, description="a robot off the traversable grid plans from the nearest "
         "traversable cell within this distance (the floor under a robot is never seen)"
     )
+    # bi-variate spatial frontiers (Alg. 1; choices and evidence: docs/edge.md)
+    frontier_voxel_m: float = Field(default=0.05, gt=0, description="ϱ: downsample voxel")
+    search_radius_m: float = Field(default=0.15, gt=0, description="r_s")
+    density_threshold: float = Field(default=27.0, gt=0, description="δ_d: F_u = ρ < δ_d")
+    variance_threshold_m2: float = Field(default=0.0128, gt=0, description="δ_v: F_w = σ² > δ_v")
+    frontier_link_m: float = Field(default=0.15, ge=0, description="voxels this close join")
+    unexplored_min_voxels: int = Field(default=8, ge=1)
+    weak_min_voxels: int = Field(default=25, ge=1)
+    unexplored_unknown_m: float = Field(
+        default=0.5, ge=0, description="an F_u region is worth visiting only this close (xy) to "
+        "unknown space on the merged grid; edges of what a camera can ever see are not")
+    frontier_z_max_m: float = Field(default=1.5, description="voxels above are never frontiers")
+    goal_max_offset_3d_m: float = Field(default=1.5, ge=0, description="f′ offset for 3D regions")
+    # importance and revenue
+    importance_lambda: float = Field(default=0.005, gt=0, description="λ, 1/s")
+    importance_xi_s: float = Field(default=-400.0, description="ξ, s")
+    revenue_kappa: float = Field(default=1.0, gt=0, description="κ, 1/m")
+    revenue_min_path_m: float = Field(default=0.5, gt=0, description="h floor, m")
+    # baselines
+    utility_gain_scale: float = Field(default=1.0, ge=0, description="explore_lite gain_scale")
+    utility_potential_scale: float = Field(default=3.0, ge=0, description="explore_lite "
+                                           "potential_scale (per m of path)")
+    rrt_iterations: int = Field(default=600, ge=1)
+    rrt_step_m: float = Field(default=0.5, gt=0, description="RRT steer step η")
+    seed: int = Field(default=0, description="mission seed (RRT sampling)")
+    # map merger
+    merge: bool = Field(default=False, description="pose graph + registration corrections "
+                        "(off by default: it lowered coverage in missions, docs/edge.md)")
+    max_registrations: int = Field(default=1, ge=0, description="pair registrations per plan")
     # assignment
     keep_radius_m: float = Field(
         default=0.5, ge=0, description="hysteresis: a goal is kept while a frontier lies this close"
@@ -43,6 +72,9 @@ class EdgeConfig(BaseModel):
     )
     reached_blacklist_ticks: int = Field(
         default=100, ge=0, description="how long a reached goal's spot is set aside, ticks"
+    )
+    weak_visited_ticks: int = Field(
+        default=100000, ge=0, description="a reached F_w spot: revisiting would not improve it"
     )
     # completion
     complete_after_plans: int = Field(

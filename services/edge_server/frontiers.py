@@ -1,4 +1,7 @@
-"""Frontier detection on the merged 2D grid (first version; Alg. 1's 3D frontiers come later).
+"""Frontier regions on the merged 2D grid and their translated goals f′.
+
+Used as is by the classic baselines ("nearest", "utility"); the SPACE and RRT detectors build
+their own frontier masks and reuse `frontier_set` for clustering and goal translation.
 
 Frontier cells are free cells 8-adjacent to unknown cells. They are clustered with 8-connected
 labelling, clusters under `frontier_min_cells` are dropped, and each cluster is translated to a
@@ -33,6 +36,10 @@ class FrontierSet:
     goal_rc: np.ndarray  # (F, 2) translated goal f′ cell
     goal_xy: np.ndarray  # (F, 2) world centre of the goal cell
     dropped_unreachable: int = 0
+    weak: np.ndarray | None = None  # (F,) bool: F_w (True) or F_u (False); None = all F_u
+    gain: np.ndarray | None = None  # (F,) I_g(f); None = size in metres
+    importance: np.ndarray | None = None  # (F,) I_t(f); None = 1
+    centroid_z: np.ndarray | None = None  # (F,) mean height of V_f (3D frontiers)
 
     def __len__(self) -> int:
         return int(self.sizes.size)
@@ -79,15 +86,23 @@ def detect_frontiers(
     free: np.ndarray, known: np.ndarray, goal_ok: np.ndarray, spec: GridSpec, config: EdgeConfig
 ) -> FrontierSet:
     """Frontier clusters of a grid and their goals f′, chosen among `goal_ok` cells."""
-    labels, sizes = _clusters(frontier_cells(free, known), config.frontier_min_cells)
+    return frontier_set(frontier_cells(free, known), goal_ok, spec, config.frontier_min_cells,
+                        config.goal_max_offset_m)
+
+
+def frontier_set(
+    mask: np.ndarray, goal_ok: np.ndarray, spec: GridSpec, min_cells: int, max_offset_m: float
+) -> FrontierSet:
+    """8-connected clusters of `mask` (≥ min_cells) with goals f′ among `goal_ok` cells."""
+    labels, sizes = _clusters(mask, min_cells)
     n = int(sizes.size)
     if n == 0 or not goal_ok.any():
-        return empty_frontiers(free.shape)
+        return empty_frontiers(mask.shape)
     centroid_rc, anchor_rc = _anchors(labels, n)
     # For every cell, the nearest allowed goal cell (one Euclidean distance transform).
     offset, nearest = ndimage.distance_transform_edt(~goal_ok, return_indices=True)
     goal_rc = np.stack([nearest[d][anchor_rc[:, 0], anchor_rc[:, 1]] for d in (0, 1)], axis=1)
-    ok = offset[anchor_rc[:, 0], anchor_rc[:, 1]] * spec.resolution_m <= config.goal_max_offset_m
+    ok = offset[anchor_rc[:, 0], anchor_rc[:, 1]] * spec.resolution_m <= max_offset_m
     renumber = np.zeros(n + 1, np.int32)
     renumber[1:][ok] = np.arange(1, int(ok.sum()) + 1, dtype=np.int32)
     centroid_xy = spec.centre_of(centroid_rc[ok])  # centre_of takes fractional (row, col) too

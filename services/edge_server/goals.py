@@ -5,7 +5,9 @@ anchor (frontier ids are renumbered every plan, so goals are matched by place), 
 still reach it and no other robot kept that frontier first. Goals reported invalid or
 unreachable set their place aside for `blacklist_ticks`; reached goals for
 `reached_blacklist_ticks` (a frontier the robot stood at but could not clear is not worth an
-immediate second trip).
+immediate second trip); a reached F_w spot for `weak_visited_ticks` (it has been looked at
+from close by; a weak region that stays weak is not improved by a second visit). A robot whose
+frontier vanished and that gets no other goal receives a cancel for its old goal.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ class ActiveGoal:
     goal_xy: tuple[float, float]
     anchor_xy: tuple[float, float]
     revenue: float
+    weak: bool = False
 
 
 @dataclass(frozen=True)
@@ -46,19 +49,21 @@ class GoalBook:
     def __init__(self, config: EdgeConfig) -> None:
         self.config = config
         self.active: dict[int, ActiveGoal] = {}
-        self.issued: dict[int, tuple[float, float]] = {}  # goal id → goal xy
+        self.issued: dict[int, tuple[float, float, bool]] = {}  # goal id → goal x, y, F_w?
         self.blacklist: list[tuple[float, float, int]] = []  # (x, y, expiry tick)
         self.next_goal_id = 0
 
     # -- agent reports ---------------------------------------------------------------------
     def on_status(self, status: GoalStatus) -> None:
-        xy = self.issued.get(status.goal_id)
-        if status.status == "active" or xy is None:
+        issued = self.issued.get(status.goal_id)
+        if status.status == "active" or issued is None:
             return
-        ticks = (self.config.reached_blacklist_ticks if status.status == "reached"
-                 else self.config.blacklist_ticks)
+        x, y, weak = issued
+        ticks = self.config.blacklist_ticks
+        if status.status == "reached":
+            ticks = self.config.weak_visited_ticks if weak else self.config.reached_blacklist_ticks
         if ticks > 0:
-            self.blacklist.append((xy[0], xy[1], status.tick + ticks))
+            self.blacklist.append((x, y, status.tick + ticks))
         current = self.active.get(status.robot_id)
         if current is not None and current.goal_id == status.goal_id:
             log.info("robot %d goal %d %s %s", status.robot_id, status.goal_id, status.status,
@@ -117,8 +122,7 @@ class GoalBook:
                           for r in robots]).reshape(len(robots), len(frontiers))
         usable = self.allowed(frontiers, tick) & np.isfinite(reach).any(axis=0)
         kept = self._kept(robots, fields, frontiers, spec, usable)
-        for robot in [r for r in self.active if r not in kept]:
-            del self.active[robot]  # its frontier is gone: replan it
+        dropped = {r: self.active.pop(r) for r in sorted(self.active) if r not in kept}
         scores = scorer.score(reach * spec.resolution_m, frontiers)
         scores[:, ~usable] = -np.inf
         scores[:, list(kept.values())] = -np.inf
@@ -128,14 +132,21 @@ class GoalBook:
         for i, f in greedy_match(scores).items():
             assigned[robots[i]] = f
             new_goals.append(self._issue(robots[i], f, tick, frontiers, float(scores[i, f])))
+        for robot, old in dropped.items():  # frontier gone and nothing else: withdraw the goal
+            if robot not in assigned and robot in robots:
+                new_goals.append(Goal(robot_id=robot, tick=tick, goal_id=old.goal_id,
+                                      x=old.goal_xy[0], y=old.goal_xy[1], revenue=0.0,
+                                      frontier_class="weak" if old.weak else "unexplored",
+                                      cancel=True))
         return Assignment(dict(sorted(assigned.items())), new_goals, int(usable.sum()))
 
     def _issue(self, robot: int, f: int, tick: int, frontiers: FrontierSet, score: float) -> Goal:
         goal_xy = (float(frontiers.goal_xy[f, 0]), float(frontiers.goal_xy[f, 1]))
         goal_id = self.next_goal_id
         self.next_goal_id += 1
-        self.issued[goal_id] = goal_xy
+        weak = bool(frontiers.weak[f]) if frontiers.weak is not None else False
+        self.issued[goal_id] = (goal_xy[0], goal_xy[1], weak)
         anchor_xy = (float(frontiers.anchor_xy[f, 0]), float(frontiers.anchor_xy[f, 1]))
-        self.active[robot] = ActiveGoal(goal_id, goal_xy, anchor_xy, score)
+        self.active[robot] = ActiveGoal(goal_id, goal_xy, anchor_xy, score, weak)
         return Goal(robot_id=robot, tick=tick, goal_id=goal_id, x=goal_xy[0], y=goal_xy[1],
-                    frontier_class="unexplored", revenue=score)
+                    frontier_class="weak" if weak else "unexplored", revenue=score)

@@ -22,6 +22,8 @@ from schemas.messages import (
     CloudRequest,
     EdgeAck,
     GoalStatus,
+    GridRequest,
+    OccupancyGrid,
     RobotPose,
     Submap,
 )
@@ -52,12 +54,26 @@ def _subscribe(bus: Bus) -> None:
 
 
 def cloud_reply(planner: EdgePlanner, tick: int, body: bytes, max_bytes: int) -> Cloud:
-    """The merged cloud P* for a `map/cloud` query (empty body = default request)."""
-    if body:
-        decode(body, CloudRequest, max_bytes)  # validates; raises DecodeError
+    """P* (robot_id −1 or an empty body) or one robot's own map for a `map/cloud` query."""
+    request = decode(body, CloudRequest, max_bytes) if body else CloudRequest()
     merged = planner.merged
-    return Cloud(tick=tick, points_world=merged.points_world.astype(np.float32),
-                 colors=merged.colors, robot_ids=merged.robot_ids)
+    if request.robot_id < 0:
+        return Cloud(tick=tick, points_world=merged.points_world.astype(np.float32),
+                     colors=merged.colors, robot_ids=merged.robot_ids)
+    points, colors = merged.robot_cloud(request.robot_id)
+    return Cloud(tick=tick, robot_id=request.robot_id, points_world=points.astype(np.float32),
+                 colors=colors, robot_ids=np.full(len(points), request.robot_id, np.uint8))
+
+
+def robot_grid_reply(planner: EdgePlanner, tick: int, body: bytes, max_bytes: int
+                     ) -> OccupancyGrid:
+    """One robot's own grid for a `map/robot_grid` query (empty grid before any data)."""
+    request = decode(body, GridRequest, max_bytes)
+    grid = planner.robot_grid(request.robot_id, tick)
+    if grid is None:
+        return OccupancyGrid(tick=tick, resolution_m=planner.config.grid_resolution_m,
+                             origin_x=0.0, origin_y=0.0, cells=np.full((1, 1), -1, np.int8))
+    return grid
 
 
 class EdgeNode:
@@ -66,7 +82,10 @@ class EdgeNode:
     def __init__(self, bus: Bus, config: SpacemapConfig) -> None:
         self.bus = bus
         self.config = config
-        self.planner = EdgePlanner(config.edge, config.sim.tick_s)
+        edge = config.edge
+        if "seed" not in edge.model_fields_set:
+            edge = edge.model_copy(update={"seed": config.sim.seed})  # the mission seed
+        self.planner = EdgePlanner(edge, config.sim.tick_s)
         self.lock = threading.Lock()
         self.last_tick = 0
         self.plans = 0
@@ -74,6 +93,11 @@ class EdgeNode:
     def serve_cloud(self, body: bytes) -> Cloud:
         with self.lock:
             return cloud_reply(self.planner, self.last_tick, body, self.config.bus.max_array_bytes)
+
+    def serve_robot_grid(self, body: bytes) -> OccupancyGrid:
+        with self.lock:
+            return robot_grid_reply(self.planner, self.last_tick, body,
+                                    self.config.bus.max_array_bytes)
 
     def handle(self, item: Inbound | Presence) -> None:
         if isinstance(item, Presence):
@@ -126,6 +150,7 @@ def main(config: SpacemapConfig) -> None:
         node = EdgeNode(bus, config)
         _subscribe(bus)
         bus.serve(bus.keys.map_cloud(), node.serve_cloud)
+        bus.serve(bus.keys.map_robot_grid(), node.serve_robot_grid)
         bus.declare_alive("edge", 0)
         log.info("edge up on %s, planner %s", config.bus.connect, config.edge.planner)
         complete_logged = False

@@ -1,14 +1,15 @@
 """The edge's functional core: messages in, one planning update out (no bus, no clock).
 
-A plan merges the submaps (P*), builds the merged grid, computes each robot's distance field
-on the inflated grid, finds frontiers with goals f′ that some robot can reach, assigns them and
-judges completion. Everything is driven by message order and tick numbers only.
+A plan updates the pose graph (corrected submap poses go back to the agents), merges the
+submaps (P*), builds the merged grid, computes each robot's distance field on the inflated
+grid, finds frontiers with goals f′ that some robot can reach (detector per planner), assigns
+them and judges completion. Everything is driven by message order and tick numbers only.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import ndimage
@@ -28,10 +29,20 @@ from services.common.planning import distance_fields, inflate
 from services.edge_server.assignment import make_scorer
 from services.edge_server.completion import CompletionJudge
 from services.edge_server.config import EdgeConfig
-from services.edge_server.frontiers import FrontierSet, detect_frontiers, empty_frontiers
+from services.edge_server.frontiers import (
+    FrontierSet,
+    detect_frontiers,
+    empty_frontiers,
+    frontier_set,
+)
 from services.edge_server.goals import GoalBook
+from services.edge_server.importance import importance
 from services.edge_server.merged_grid import GridSnapshot, MergedGrid
 from services.edge_server.merged_map import MergedMap
+from services.edge_server.merger import MapMerger, MergerParams
+from services.edge_server.robot_views import robot_grid
+from services.edge_server.rrt import rrt_frontier_mask
+from services.edge_server.spatial_frontiers import detect_spatial_frontiers
 from services.edge_server.submap_store import SubmapStore
 
 
@@ -65,14 +76,19 @@ def robot_fields(
 
 def frontiers_message(tick: int, fs: FrontierSet, complete: bool, assigned: dict[int, int],
                       resolution_m: float) -> Frontiers:
+    n = len(fs)
+    weak = fs.weak if fs.weak is not None else np.zeros(n, bool)
+    gain = fs.gain if fs.gain is not None else fs.sizes * resolution_m
+    imp = fs.importance if fs.importance is not None else np.ones(n)
+    z = fs.centroid_z if fs.centroid_z is not None else np.zeros(n)
     items = [
         Frontier(
-            frontier_id=i, frontier_class="unexplored",
-            centroid=(float(fs.centroid_xy[i, 0]), float(fs.centroid_xy[i, 1]), 0.0),
+            frontier_id=i, frontier_class="weak" if weak[i] else "unexplored",
+            centroid=(float(fs.centroid_xy[i, 0]), float(fs.centroid_xy[i, 1]), float(z[i])),
             goal_xy=(float(fs.goal_xy[i, 0]), float(fs.goal_xy[i, 1])),
-            size=int(fs.sizes[i]), gain=float(fs.sizes[i]) * resolution_m, importance=1.0,
+            size=int(fs.sizes[i]), gain=float(gain[i]), importance=float(imp[i]),
         )
-        for i in range(len(fs))
+        for i in range(n)
     ]
     return Frontiers(tick=tick, frontiers=items, complete=complete, assigned=assigned)
 
@@ -82,12 +98,15 @@ class EdgePlanner:
 
     def __init__(self, config: EdgeConfig, tick_s: float) -> None:
         self.config = config
+        self.tick_s = tick_s
         self.store = SubmapStore(config.voxel_m)
+        self.merger = MapMerger(config.voxel_m,
+                                MergerParams(max_registrations=config.max_registrations))
         self.merged = MergedMap(config.voxel_m)
         self.grid = MergedGrid(config)
         self.book = GoalBook(config)
         self.judge = CompletionJudge(config, tick_s)
-        self.scorer = make_scorer(config.planner)
+        self.scorer = make_scorer(config.planner, config)
         self.poses: dict[int, Pose2D] = {}
         self.dead: set[int] = set()
         self.last_grid: GridSnapshot | None = None
@@ -114,7 +133,50 @@ class EdgePlanner:
     def active_robots(self) -> list[int]:
         return sorted(r for r in self.poses if r not in self.dead)
 
+    def robot_grid(self, robot_id: int, tick: int) -> OccupancyGrid | None:
+        """One robot's own grid on the merged grid's current bounds (map/robot_grid)."""
+        return robot_grid(self.store, self.merged, self.grid, robot_id, tick)
+
+    def _merge(self, tick: int) -> list[Correction]:
+        """Pose-graph update; corrected poses move the submaps and go back to the agents."""
+        if not self.config.merge:
+            return []
+        changed = self.merger.update(self.store)
+        for key in sorted(changed):
+            self.store.set_pose(key, changed[key])
+        out = []
+        for robot in sorted({r for r, _ in changed}):
+            ids = sorted(s for r, s in self.merger.estimates if r == robot)
+            poses = np.stack([self.merger.estimates[(robot, s)] for s in ids])
+            out.append(Correction(robot_id=robot, tick=tick, submap_ids=np.array(ids, np.int32),
+                                  T_world_submap=poses))
+        return out
+
+    def _frontiers(
+        self, tick: int, snap: GridSnapshot, traversable: np.ndarray, reachable: np.ndarray,
+        fields: dict[int, np.ndarray], robot_xy: np.ndarray,
+    ) -> FrontierSet:
+        """Frontier regions of the configured planner, with goals among `reachable` cells."""
+        cfg, spec = self.config, snap.spec
+        if cfg.planner == "space":
+            fs, _ = detect_spatial_frontiers(self.merged, snap.known, reachable,
+                                             spec, cfg)
+            imp = importance(tick * self.tick_s, robot_xy, fs.centroid_xy, fs.weak,
+                             cfg.importance_lambda, cfg.importance_xi_s)
+            return replace(fs, importance=imp)
+        if cfg.planner == "rrt":
+            starts = [tuple(int(v) for v in np.argwhere(f == 0)[0])
+                      for _, f in sorted(fields.items()) if (f == 0).any()]
+            rng = np.random.default_rng([cfg.seed, tick])
+            mask = rrt_frontier_mask(traversable, snap.known, starts, cfg.rrt_iterations,
+                                     cfg.rrt_step_m / spec.resolution_m, rng)
+            link = int(round(cfg.frontier_link_m / spec.resolution_m))
+            mask = ndimage.binary_dilation(mask, np.ones((2 * link + 1,) * 2, bool)) & ~snap.known
+            return frontier_set(mask, reachable, spec, 1, cfg.goal_max_offset_m)
+        return detect_frontiers(snap.free, snap.known, reachable, spec, cfg)
+
     def plan(self, tick: int) -> PlanOutput:
+        corrections = self._merge(tick)
         self.merged.update(self.store)
         robots = self.active_robots()
         robot_xy = np.array([[self.poses[r].x, self.poses[r].y] for r in robots]).reshape(-1, 2)
@@ -125,7 +187,8 @@ class EdgePlanner:
         if snap is None:
             complete = self.judge.update(tick, 0, 0)
             return PlanOutput(None, frontiers_message(tick, empty_frontiers((0, 0)), complete, {},
-                                                      self.config.grid_resolution_m), [])
+                                                      self.config.grid_resolution_m), [],
+                              corrections)
         spec = snap.spec
         radius_cells = math.ceil(self.config.robot_radius_m / spec.resolution_m - 1e-9)
         traversable = snap.free & ~inflate(snap.occupied, radius_cells)
@@ -134,10 +197,11 @@ class EdgePlanner:
         reachable = np.zeros(spec.shape, bool)
         for f in fields.values():
             reachable |= np.isfinite(f)
-        fs = detect_frontiers(snap.free, snap.known, reachable, spec, self.config)
+        fs = self._frontiers(tick, snap, traversable, reachable, fields, robot_xy)
         result = self.book.plan(tick, robots, fields, fs, spec, self.scorer)
         complete = self.judge.update(tick, result.assignable, int(snap.known.sum()))
         grid_msg = OccupancyGrid(tick=tick, resolution_m=spec.resolution_m, origin_x=spec.origin_x,
                                  origin_y=spec.origin_y, cells=snap.cells)
         return PlanOutput(grid_msg, frontiers_message(tick, fs, complete, result.assigned,
-                                                      spec.resolution_m), result.new_goals)
+                                                      spec.resolution_m), result.new_goals,
+                          corrections)

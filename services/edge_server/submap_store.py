@@ -5,6 +5,12 @@ voxel keys (services.common.voxels) with colour, observation count and the tick 
 first received (the merged map uses it to name a voxel's first observer). New voxels are only
 ever appended, so consumers can cache by length. `version` bumps on new data and
 `pose_version` when the pose changes, so the merged map and grid know what to recompute.
+
+Poses: `T_reported` is the agent's latest estimate; `T_world_submap` is where the submap is
+placed, the reported pose until the merger corrects it (`corrected`), after which reports no
+longer move it (a later delta of an old submap carries the agent's re-anchored frame).
+Sequence numbers are checked per (robot, epoch): a restarted agent starts a new epoch, and a
+resend of data the edge already holds is applied idempotently (upserts) without a gap warning.
 """
 
 from __future__ import annotations
@@ -38,6 +44,9 @@ class StoredSubmap:
     free_cells: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
     version: int = 0
     pose_version: int = 0
+    epoch: int = 0
+    T_reported: np.ndarray = field(default_factory=lambda: np.eye(4))
+    corrected: bool = False
 
     @property
     def key(self) -> SubmapKey:
@@ -71,21 +80,23 @@ class SubmapStore:
     def __init__(self, voxel_m: float) -> None:
         self.voxel_m = voxel_m
         self.submaps: dict[SubmapKey, StoredSubmap] = {}
-        self.last_seq: dict[int, int] = {}
+        self.last_seq: dict[tuple[int, int], int] = {}  # (robot, epoch) → last seq
         self.seq_gaps: Counter[int] = Counter()
         self.version = 0  # bumps on any change, for cheap "anything new?" checks
 
     def apply(self, msg: Submap) -> StoredSubmap:
         """Apply one submap (or delta): upsert voxels, add free cells, take its pose."""
-        self._check_seq(msg.robot_id, msg.seq)
+        self._check_seq(msg.robot_id, msg.epoch, msg.seq)
         key = (msg.robot_id, msg.submap_id)
         sm = self.submaps.get(key)
         if sm is None:
-            sm = StoredSubmap(msg.robot_id, msg.submap_id, msg.T_world_submap.copy(), msg.cell_m)
+            sm = StoredSubmap(msg.robot_id, msg.submap_id, msg.T_world_submap.copy(), msg.cell_m,
+                              epoch=msg.epoch)
             self.submaps[key] = sm
-        elif not np.array_equal(sm.T_world_submap, msg.T_world_submap):
+        elif not sm.corrected and not np.array_equal(sm.T_world_submap, msg.T_world_submap):
             sm.T_world_submap = msg.T_world_submap.copy()
             sm.pose_version += 1
+        sm.T_reported = msg.T_world_submap.copy()
         points_submap = msg.points_mm.T.astype(np.float64) / 1000.0  # mm → m, (N, 3)
         if points_submap.shape[0]:
             keys = pack(voxel_indices(points_submap, self.voxel_m))
@@ -101,6 +112,7 @@ class SubmapStore:
     def set_pose(self, key: SubmapKey, T_world_submap: np.ndarray) -> bool:
         """Place a submap by a corrected pose; True when it changed."""
         sm = self.submaps[key]
+        sm.corrected = True
         if np.array_equal(sm.T_world_submap, T_world_submap):
             return False
         sm.T_world_submap = np.asarray(T_world_submap, dtype=np.float64).copy()
@@ -115,9 +127,12 @@ class SubmapStore:
         """Submaps in a deterministic order (robot, submap id)."""
         return [self.submaps[k] for k in sorted(self.submaps)]
 
-    def _check_seq(self, robot_id: int, seq: int) -> None:
-        last = self.last_seq.get(robot_id)
+    def _check_seq(self, robot_id: int, epoch: int, seq: int) -> None:
+        last = self.last_seq.get((robot_id, epoch))
+        if last is not None and seq <= last:
+            return  # a resend: applied idempotently, the counter does not go back
         if last is not None and seq != last + 1:
             self.seq_gaps[robot_id] += 1
-            log.warning("robot %d submap seq gap: %d after %d", robot_id, seq, last)
-        self.last_seq[robot_id] = seq
+            log.warning("robot %d epoch %d submap seq gap: %d after %d", robot_id, epoch, seq,
+                        last)
+        self.last_seq[(robot_id, epoch)] = seq

@@ -1,0 +1,165 @@
+"""Coherent spatial map merger: the incremental pose graph over every robot's submaps.
+
+Nodes are submaps. A robot's first submap gets a tight prior at its reported pose (robots start
+from known initial poses); the first submap of a later epoch (a restarted agent) a loose one.
+Consecutive submaps of one robot and epoch are joined by an odometry edge, frozen when the
+newer submap first arrives: T_a_b = T_world_a⁻¹·T_reported_b, with T_world_a the corrected
+pose when the edge corrected a (the agent re-anchors its odometry frame on the newest
+corrected submap, which is a). Pairs of submaps of different robots whose world boxes overlap
+are registered once both are closed (their robot has started a newer one), at most
+`max_registrations` per update, so the cost is amortised across ticks. LM runs only when the
+graph changed and holds at least one registration edge; until then placements follow reports.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+from gtsam import Pose3
+
+from services.common.geometry import invert
+from services.common.voxels import centres, unpack
+from services.edge_server.pose_graph import Between, Prior, info_diag, optimize
+from services.edge_server.registration import (
+    Prepared,
+    RegistrationParams,
+    prepare,
+    register,
+    world_box,
+)
+from services.edge_server.submap_store import StoredSubmap, SubmapKey, SubmapStore
+
+log = logging.getLogger(__name__)
+
+# ruff: noqa: N806 (T_a_b names)
+
+
+@dataclass(frozen=True)
+class MergerParams:
+    prior_info: np.ndarray = field(default_factory=lambda: info_diag([1e-3] * 3, [1e-3] * 3))
+    restart_prior_info: np.ndarray = field(
+        default_factory=lambda: info_diag([0.02, 0.02, 0.2], [0.5, 0.5, 0.02]))
+    # planar odometry: roll, pitch and z are nearly exact; x, y and yaw drift
+    odometry_info: np.ndarray = field(
+        default_factory=lambda: info_diag([0.01, 0.01, 0.08], [0.15, 0.15, 0.01]))
+    min_overlap_m3: float = 0.5
+    min_points: int = 200
+    max_registrations: int = 2
+    correction_tol_m: float = 0.01
+    correction_tol_rad: float = 0.004
+    registration: RegistrationParams = field(default_factory=RegistrationParams)
+
+
+def pose_change(T_a: np.ndarray, T_b: np.ndarray) -> tuple[float, float]:
+    """(translation m, rotation rad) between two poses."""
+    xi = Pose3.Logmap(Pose3(T_a).between(Pose3(T_b)))
+    return float(np.linalg.norm(xi[3:])), float(np.linalg.norm(xi[:3]))
+
+
+class MapMerger:
+    """Pose graph state; `update(store)` returns the submap poses that changed."""
+
+    def __init__(self, voxel_m: float, params: MergerParams | None = None) -> None:
+        self.voxel_m = voxel_m  # the store's voxel keys are at this size
+        self.params = params or MergerParams()
+        self.priors: dict[SubmapKey, Prior] = {}
+        self.odometry: list[Between] = []
+        self.registrations: dict[tuple[SubmapKey, SubmapKey], Between | None] = {}
+        self.estimates: dict[SubmapKey, np.ndarray] = {}
+        self.inliers: dict[tuple[SubmapKey, SubmapKey], bool] = {}
+        self._points: dict[SubmapKey, tuple[int, np.ndarray, np.ndarray]] = {}  # n, points, box
+        self._prepared: dict[SubmapKey, tuple[int, Prepared]] = {}
+        self._epochs: dict[int, set[int]] = {}
+        self._dirty = False
+
+    # -- graph building --------------------------------------------------------------------
+    def _add_node(self, sm: StoredSubmap, previous: StoredSubmap | None) -> None:
+        key = sm.key
+        self.estimates[key] = sm.T_reported.copy()
+        epochs = self._epochs.setdefault(sm.robot_id, set())
+        if not epochs:
+            self.priors[key] = Prior(key, sm.T_reported.copy(), self.params.prior_info)
+        elif sm.epoch not in epochs or previous is None or previous.epoch != sm.epoch:
+            self.priors[key] = Prior(key, sm.T_reported.copy(), self.params.restart_prior_info)
+        else:
+            T_world_a = previous.T_world_submap if previous.corrected else previous.T_reported
+            self.odometry.append(Between(previous.key, key, invert(T_world_a) @ sm.T_reported,
+                                         self.params.odometry_info, robust=False))
+        epochs.add(sm.epoch)
+        self._dirty = True
+
+    def _cached(self, sm: StoredSubmap) -> tuple[int, np.ndarray, np.ndarray]:
+        cached = self._points.get(sm.key)
+        if cached is None or cached[0] != sm.keys.size:
+            points = centres(unpack(sm.keys), self.voxel_m)
+            cached = (sm.keys.size, points, np.stack([points.min(axis=0), points.max(axis=0)]))
+            self._points[sm.key] = cached
+        return cached
+
+    def _points_of(self, sm: StoredSubmap) -> np.ndarray:
+        return self._cached(sm)[1]
+
+    def _candidates(self, closed: list[StoredSubmap]) -> list[tuple[StoredSubmap, StoredSubmap]]:
+        """Untried pairs of closed submaps of different robots, largest box overlap first."""
+        if len(closed) < 2:
+            return []
+        boxes = np.stack([world_box(self._cached(sm)[2], self.estimates[sm.key]) for sm in closed])
+        side = (np.minimum(boxes[:, None, 1], boxes[None, :, 1])
+                - np.maximum(boxes[:, None, 0], boxes[None, :, 0]))
+        overlap = np.prod(np.maximum(side, 0.0), axis=2)  # (n, n) box overlap volumes
+        robots = np.array([sm.robot_id for sm in closed])
+        ok = np.triu(overlap >= self.params.min_overlap_m3, 1) & (robots[:, None] != robots)
+        rows, cols = np.nonzero(ok)
+        order = np.lexsort((cols, rows, -overlap[rows, cols]))  # largest first, then by index
+        pairs = [(closed[i], closed[j]) for i, j in zip(rows[order], cols[order], strict=True)]
+        return [(a, b) for a, b in pairs if (a.key, b.key) not in self.registrations]
+
+    def _prepared_of(self, sm: StoredSubmap) -> Prepared:
+        """Downsampled cloud + covariances + KD-tree, built once per submap size."""
+        cached = self._prepared.get(sm.key)
+        if cached is None or cached[0] != sm.keys.size:
+            cached = (sm.keys.size, prepare(self._points_of(sm), self.params.registration))
+            self._prepared[sm.key] = cached
+        return cached[1]
+
+    def _register(self, target: StoredSubmap, source: StoredSubmap) -> None:
+        T_init = invert(self.estimates[target.key]) @ self.estimates[source.key]
+        result = register(self._prepared_of(target), self._prepared_of(source), T_init,
+                          self.params.registration)
+        edge = None
+        if result is not None:
+            edge = Between(target.key, source.key, result.T_target_source, result.info, True)
+            self._dirty = True
+        self.registrations[(target.key, source.key)] = edge
+        log.debug("registration %s ← %s: %s", target.key, source.key,
+                  "kept" if edge else "rejected")
+
+    # -- update ----------------------------------------------------------------------------
+    def update(self, store: SubmapStore) -> dict[SubmapKey, np.ndarray]:
+        by_robot: dict[int, list[StoredSubmap]] = {}
+        for sm in store.ordered():
+            by_robot.setdefault(sm.robot_id, []).append(sm)
+        closed = []
+        for sms in by_robot.values():
+            for i, sm in enumerate(sms):
+                if sm.key not in self.estimates:
+                    self._add_node(sm, sms[i - 1] if i else None)
+            closed += [sm for sm in sms[:-1] if sm.keys.size >= self.params.min_points]
+        for target, source in self._candidates(closed)[: self.params.max_registrations]:
+            self._register(target, source)
+        edges = [e for e in self.registrations.values() if e is not None]
+        if not self._dirty or not edges:
+            return {}
+        self._dirty = False
+        result = optimize(self.estimates, list(self.priors.values()), self.odometry + edges)
+        self.inliers = {(e.a, e.b): ok for e, ok in
+                        zip(edges, result.inlier[len(self.odometry):], strict=True)}
+        self.estimates = result.poses
+        changed = {}
+        for key, T in result.poses.items():
+            dt, dr = pose_change(store.submaps[key].T_world_submap, T)
+            if dt > self.params.correction_tol_m or dr > self.params.correction_tol_rad:
+                changed[key] = T
+        return changed

@@ -1,0 +1,104 @@
+"""Pairwise submap registration (small_gicp GICP) and the candidate pairs worth registering.
+
+A pair is a candidate when the two submaps belong to different robots and their world boxes
+(at the current estimates) overlap by at least `min_overlap_m3`. GICP starts from the current
+relative estimate; a result is kept only when it converged, enough source points found a
+partner and it moved the estimate less than a gate (a registration that wanders far is more
+likely a wrong basin than a correction). small_gicp's Hessian H is already in GTSAM's
+convention (rotation first, right perturbation of T_target_source); its absolute scale depends
+on point count and covariances, so it is rescaled to a mean translational σ of `sigma_m`
+before the robust kernels judge residuals (field notes), keeping its shape (weak directions of
+a corridor stay weak).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import small_gicp
+from gtsam import Pose3
+
+# ruff: noqa: N806 (T_a_b names)
+
+
+@dataclass(frozen=True)
+class RegistrationParams:
+    downsample_m: float = 0.15
+    max_corr_m: float = 0.5
+    fine_downsample_m: float = 0.1
+    fine_corr_m: float = 0.12
+    neighbors: int = 10
+    max_iterations: int = 30
+    min_inlier_frac: float = 0.5
+    max_shift_m: float = 0.5
+    max_turn_rad: float = 0.2
+    sigma_m: float = 0.01
+
+
+@dataclass(frozen=True)
+class PairResult:
+    T_target_source: np.ndarray
+    info: np.ndarray  # (6, 6) GTSAM convention, scaled
+    inlier_frac: float
+
+
+def world_box(box_submap: np.ndarray, T_world_submap: np.ndarray) -> np.ndarray:
+    """(2, 3) axis-aligned world box of a submap's (2, 3) own box (its corners, moved)."""
+    lo, hi = box_submap
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                        for z in (lo[2], hi[2])])
+    world = corners @ T_world_submap[:3, :3].T + T_world_submap[:3, 3]
+    return np.stack([world.min(axis=0), world.max(axis=0)])
+
+
+def scaled_info(H: np.ndarray, sigma_m: float) -> np.ndarray:
+    """H rescaled so its translational block has mean diagonal 1/σ²; symmetrised."""
+    H = 0.5 * (H + H.T)
+    scale = float(np.mean(np.diag(H)[3:]))
+    return H / (scale * sigma_m**2) if scale > 0 else np.zeros((6, 6))
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A submap cloud downsampled, with covariances and KD-tree, at both levels (reusable)."""
+
+    coarse: tuple[small_gicp.PointCloud, small_gicp.KdTree]
+    fine: tuple[small_gicp.PointCloud, small_gicp.KdTree]
+    n_fine: int
+
+
+def prepare(points_submap: np.ndarray, params: RegistrationParams) -> Prepared:
+    points = np.asarray(points_submap, np.float64)
+    coarse = small_gicp.preprocess_points(points, params.downsample_m,
+                                          num_neighbors=params.neighbors)
+    fine = small_gicp.preprocess_points(points, params.fine_downsample_m,
+                                        num_neighbors=params.neighbors)
+    return Prepared(coarse, fine, fine[0].size())
+
+
+def register(
+    target: Prepared, source: Prepared, T_target_source_init: np.ndarray,
+    params: RegistrationParams,
+) -> PairResult | None:
+    """GICP of source onto target (each in its own submap frame); None when rejected.
+
+    Coarse to fine: a wide correspondence radius pulls in from the drifted estimate, a tight
+    one then stops points beyond the other submap's edge from biasing the result."""
+    coarse = small_gicp.align(
+        target.coarse[0], source.coarse[0], target.coarse[1], T_target_source_init,
+        registration_type="GICP", max_correspondence_distance=params.max_corr_m,
+        num_threads=1, max_iterations=params.max_iterations,
+    )
+    res = small_gicp.align(
+        target.fine[0], source.fine[0], target.fine[1], coarse.T_target_source,
+        registration_type="GICP", max_correspondence_distance=params.fine_corr_m,
+        num_threads=1, max_iterations=params.max_iterations,
+    )
+    frac = res.num_inliers / max(source.n_fine, 1)
+    step = Pose3.Logmap(Pose3(T_target_source_init).between(Pose3(res.T_target_source)))
+    if (not res.converged or frac < params.min_inlier_frac
+            or np.linalg.norm(step[3:]) > params.max_shift_m
+            or np.linalg.norm(step[:3]) > params.max_turn_rad):
+        return None
+    return PairResult(res.T_target_source.copy(), scaled_info(res.H, params.sigma_m), frac)

@@ -1,0 +1,53 @@
+"""RRT frontier detection in the style of rrt_exploration (Umari & Mukhopadhyay, IROS 2017).
+
+A tree grows from every robot's start cell over the traversable part of the merged grid:
+sample a cell uniformly in the grid, steer from the nearest tree node by at most η, and walk
+the segment. A segment that reaches an unknown cell yields a frontier point there (the tree
+does not grow into it); one that hits a non-traversable known cell is dropped; otherwise the
+new node joins the tree. Sampling uses a np.random.Generator seeded from (mission seed,
+tick), so a lockstep mission repeats exactly. The frontier points become the mask that
+`frontier_set` clusters and translates to goals.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def _walk(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(S, 2) int cells on the segment a → b (a excluded), sampled at ≤ half a cell."""
+    n = max(int(np.ceil(2 * np.abs(b - a).max())), 1)
+    t = np.arange(1, n + 1)[:, None] / n
+    return np.round(a + t * (b - a)).astype(np.int64)
+
+
+def rrt_frontier_mask(
+    traversable: np.ndarray, known: np.ndarray, starts_rc: list[tuple[int, int]],
+    iterations: int, step_cells: float, rng: np.random.Generator,
+) -> np.ndarray:
+    """(H, W) bool: frontier points found by a multi-root RRT."""
+    H, W = traversable.shape
+    mask = np.zeros((H, W), bool)
+    if not starts_rc:
+        return mask
+    nodes = np.zeros((len(starts_rc) + iterations, 2))
+    nodes[: len(starts_rc)] = np.asarray(starts_rc, np.float64)
+    count = len(starts_rc)
+    samples = rng.uniform([0, 0], [H - 1, W - 1], size=(iterations, 2))
+    for x in samples:
+        d2 = ((nodes[:count] - x) ** 2).sum(axis=1)
+        near = nodes[int(np.argmin(d2))]
+        dist = float(np.sqrt(d2.min()))
+        new = x if dist <= step_cells else near + (x - near) * (step_cells / dist)
+        cells = _walk(near, new)
+        unknown = ~known[cells[:, 0], cells[:, 1]]
+        blocked = known[cells[:, 0], cells[:, 1]] & ~traversable[cells[:, 0], cells[:, 1]]
+        first_unknown = int(np.argmax(unknown)) if unknown.any() else len(cells)
+        first_blocked = int(np.argmax(blocked)) if blocked.any() else len(cells)
+        if first_unknown < first_blocked:
+            r, c = cells[first_unknown]
+            mask[r, c] = True
+        elif first_blocked == len(cells):
+            nodes[count] = new
+            count += 1
+    return mask

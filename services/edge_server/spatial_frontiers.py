@@ -1,0 +1,118 @@
+"""SPACE frontier regions: Alg. 1 point masks → regions with I_g(f) and reachable goals f′.
+
+Per class, the frontier voxels are projected onto the merged grid, dilated by
+`frontier_link_m` (voxels that close belong to one region) and clustered; each region gets
+its voxels V_f, I_g(f) = mean point entropy over V_f, a 3D centroid, and the translated goal
+f′: the reachable grid cell nearest the region's anchor within `goal_max_offset_3d_m`.
+Regions smaller than the class minimum are dropped, as are F_u regions farther than
+`unexplored_unknown_m` from unknown space (the top rim of what a ground camera ever sees is
+low-density forever; it is not an unexplored region a robot can go and see).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+from services.common.grid import GridSpec
+from services.common.voxels import unpack
+from services.edge_server.config import EdgeConfig
+from services.edge_server.frontiers import FrontierSet, empty_frontiers, frontier_set
+from services.edge_server.frontiers3d import (
+    PointFrontiers,
+    detect_point_frontiers,
+    lattice_frontiers,
+    point_entropy,
+)
+from services.edge_server.merged_map import MergedMap
+
+
+def subset(fs: FrontierSet, keep: np.ndarray) -> FrontierSet:
+    """The regions where `keep` is True, renumbered (labels included)."""
+    renumber = np.zeros(len(fs) + 1, np.int32)
+    renumber[1:][keep] = np.arange(1, int(keep.sum()) + 1, dtype=np.int32)
+    pick = {name: (getattr(fs, name)[keep] if getattr(fs, name) is not None else None)
+            for name in ("sizes", "centroid_xy", "anchor_rc", "anchor_xy", "goal_rc", "goal_xy",
+                         "weak", "gain", "importance", "centroid_z")}
+    return FrontierSet(labels=renumber[fs.labels], dropped_unreachable=fs.dropped_unreachable,
+                       **pick)
+
+
+def concat(a: FrontierSet, b: FrontierSet) -> FrontierSet:
+    """Regions of a, then of b (b's labels win where both cover a cell)."""
+    labels = np.where(b.labels > 0, b.labels + len(a), a.labels).astype(np.int32)
+    fields = {}
+    for name in ("sizes", "centroid_xy", "anchor_rc", "anchor_xy", "goal_rc", "goal_xy",
+                 "weak", "gain", "importance", "centroid_z"):
+        fields[name] = np.concatenate([getattr(a, name), getattr(b, name)])
+    return FrontierSet(labels=labels, dropped_unreachable=a.dropped_unreachable
+                       + b.dropped_unreachable, **fields)
+
+
+def class_regions(
+    pf: PointFrontiers, weak: bool, goal_ok: np.ndarray, spec: GridSpec, config: EdgeConfig,
+) -> FrontierSet:
+    """Regions of one class with |V_f|, I_g, 3D centroid and goals f′."""
+    mask = (pf.weak if weak else pf.unexplored) & (pf.points_world[:, 2] <= config.frontier_z_max_m)
+    sel = np.flatnonzero(mask)
+    rc = spec.cell_of(pf.points_world[sel, :2])
+    inside = spec.contains(rc)
+    sel, rc = sel[inside], rc[inside]
+    cells = np.zeros(spec.shape, bool)
+    cells[rc[:, 0], rc[:, 1]] = True
+    r = int(round(config.frontier_link_m / spec.resolution_m))
+    if r > 0 and sel.size:
+        cells = ndimage.binary_dilation(cells, structure=np.ones((2 * r + 1,) * 2, bool))
+    fs = frontier_set(cells, goal_ok, spec, 1, config.goal_max_offset_3d_m)
+    n = len(fs)
+    lab = fs.labels[rc[:, 0], rc[:, 1]] - 1
+    ok = lab >= 0
+    sel, lab = sel[ok], lab[ok]
+    count = np.bincount(lab, minlength=n)
+    denom = np.maximum(count, 1)
+    gain = np.bincount(lab, point_entropy(pf, weak)[sel], n) / denom
+    z = np.bincount(lab, pf.points_world[sel, 2], n) / denom
+    xy = np.stack([np.bincount(lab, pf.points_world[sel, d], n) for d in (0, 1)], 1)
+    fs = FrontierSet(labels=fs.labels, sizes=count, centroid_xy=xy / denom[:, None],
+                     anchor_rc=fs.anchor_rc, anchor_xy=fs.anchor_xy, goal_rc=fs.goal_rc,
+                     goal_xy=fs.goal_xy, dropped_unreachable=fs.dropped_unreachable,
+                     weak=np.full(n, weak), gain=gain, importance=np.ones(n), centroid_z=z)
+    min_voxels = config.weak_min_voxels if weak else config.unexplored_min_voxels
+    return subset(fs, count >= min_voxels)
+
+
+def near_unknown(fs: FrontierSet, known: np.ndarray, spec: GridSpec, max_m: float) -> np.ndarray:
+    """(F,) bool: regions with a label cell within `max_m` of an unknown grid cell."""
+    if not len(fs):
+        return np.zeros(0, bool)
+    dist = ndimage.distance_transform_edt(known) * spec.resolution_m
+    close = (fs.labels > 0) & (dist <= max_m)
+    hit = np.bincount(fs.labels[close] - 1, minlength=len(fs)) > 0
+    return hit
+
+
+def detect_spatial_frontiers(
+    merged: MergedMap, known: np.ndarray, goal_ok: np.ndarray, spec: GridSpec,
+    config: EdgeConfig,
+) -> tuple[FrontierSet, PointFrontiers]:
+    """F_u regions then F_w regions of P*, with gains and goals (importance still 1)."""
+    args = (config.frontier_voxel_m, config.search_radius_m, config.density_threshold,
+            config.variance_threshold_m2)
+    if np.isclose(merged.voxel_m, config.frontier_voxel_m):  # P* is already on the ϱ lattice
+        pf = lattice_frontiers(unpack(merged.keys), *args)
+    else:
+        pf = detect_point_frontiers(merged.points_world, *args)
+    if not len(pf.rho) or not goal_ok.any():
+        return _typed_empty(spec), pf
+    unexplored = class_regions(pf, False, goal_ok, spec, config)
+    unexplored = subset(unexplored, near_unknown(unexplored, known, spec,
+                                                 config.unexplored_unknown_m))
+    weak = class_regions(pf, True, goal_ok, spec, config)
+    return concat(unexplored, weak), pf
+
+
+def _typed_empty(spec: GridSpec) -> FrontierSet:
+    e = empty_frontiers(spec.shape)
+    z = np.zeros(0)
+    return FrontierSet(e.labels, e.sizes, e.centroid_xy, e.anchor_rc, e.anchor_xy, e.goal_rc,
+                       e.goal_xy, 0, np.zeros(0, bool), z, z, z)

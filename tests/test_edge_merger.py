@@ -1,0 +1,119 @@
+"""Edge map merger: GTSAM pose graph with registration edges, drift recovery, false edges."""
+
+from __future__ import annotations
+
+import numpy as np
+from gtsam import Pose3
+
+from services.common.geometry import T_from_xyyaw, invert, transform_points
+from services.edge_server.merger import MapMerger, pose_change
+from services.edge_server.pose_graph import Between, Prior, info_diag, left_to_right_info, optimize
+from services.edge_server.submap_store import SubmapStore
+from tests.test_edge_map import make_submap
+
+V = 0.05
+
+
+def _box(size: np.ndarray, s: float) -> np.ndarray:
+    g = np.stack(np.meshgrid(*(np.arange(0, d, s) for d in size)), -1).reshape(-1, 3)
+    return g[((g == 0) | (g >= size - s)).any(axis=1)]
+
+
+def scene() -> np.ndarray:
+    """A 6 × 4 m room at 2 cm: floor, walls and 12 boxes of random size and yaw (6-DOF
+    structure whose planes sit at random offsets to the 5 cm voxel lattice)."""
+    s, rng = 0.02, np.random.default_rng(7)
+    u, v, h = np.arange(0, 6.03, s), np.arange(0, 4.01, s), np.arange(0, 1.5, s)
+    parts = [np.stack(np.meshgrid(u, v, [0.0]), -1).reshape(-1, 3)]
+    parts += [np.stack(np.meshgrid(u, [y], h), -1).reshape(-1, 3) for y in (0.0, 4.01)]
+    parts += [np.stack(np.meshgrid([x], v, h), -1).reshape(-1, 3) for x in (0.0, 6.03)]
+    for _ in range(12):
+        box = _box(rng.uniform([0.2, 0.2, 0.3], [0.8, 0.8, 1.2]), s)
+        T = T_from_xyyaw(*rng.uniform([0.5, 0.4, -np.pi], [5.5, 3.6, np.pi]))
+        parts.append(transform_points(T, box))
+    return np.concatenate(parts)
+
+
+def crop(points_world: np.ndarray, T_world_submap: np.ndarray, radius: float = 3.5) -> np.ndarray:
+    near = np.linalg.norm(points_world[:, :2] - T_world_submap[:2, 3], axis=1) < radius
+    return transform_points(invert(T_world_submap), points_world[near])
+
+
+def build_store(drift: np.ndarray, false_target: bool = False) -> tuple[SubmapStore, dict]:
+    """Robot 0 (truth) and robot 1 (drifting after its first submap) tour the same room."""
+    world = scene()
+    truth = {(0, 0): T_from_xyyaw(1.52, 1.97, 0.1), (0, 1): T_from_xyyaw(3.0, 2.0, 0.2),
+             (0, 2): T_from_xyyaw(4.47, 2.03, -0.12), (0, 3): T_from_xyyaw(5.0, 2.5, 0.5),
+             (1, 0): T_from_xyyaw(4.5, 1.8, 3.0), (1, 1): T_from_xyyaw(3.0, 1.8, 2.9),
+             (1, 2): T_from_xyyaw(1.5, 2.2, 3.1), (1, 3): T_from_xyyaw(1.0, 2.5, 2.0)}
+    store = SubmapStore(V)
+    for (robot, sid), T in sorted(truth.items(), key=lambda kv: (kv[0][1], kv[0][0])):
+        reported = drift @ T if (robot == 1 and sid > 0) else T
+        points = crop(world, T)
+        store.apply(make_submap(robot, sid, sid, 10 * sid + 1, reported, points))
+    return store, truth
+
+
+def test_drift_recovered_by_registration() -> None:
+    drift = T_from_xyyaw(0.0, 0.0, np.deg2rad(7.0))
+    drift[:2, 3] = [0.3 * np.cos(0.5), 0.3 * np.sin(0.5)]
+    drift = T_from_xyyaw(0, 0, 0) @ drift
+    store, truth = build_store(drift)
+    merger = MapMerger(V)
+    changed: dict = {}
+    for _ in range(16):  # registrations are amortised: a few per update
+        out = merger.update(store)
+        for key, T in out.items():
+            store.set_pose(key, T)
+        changed.update(out)
+    accepted = [e for e in merger.registrations.values() if e is not None]
+    assert len(accepted) >= 3
+    for key in [(1, 1), (1, 2)]:
+        before = pose_change(store.submaps[key].T_reported, truth[key])
+        after = pose_change(merger.estimates[key], truth[key])
+        assert before[0] > 0.25 and before[1] > np.deg2rad(6.5)
+        assert after[0] < 0.02 and after[1] < np.deg2rad(0.5), after
+        assert key in changed
+    for key in [(0, 0), (0, 1), (0, 2), (1, 0)]:
+        assert pose_change(merger.estimates[key], truth[key])[0] < 0.02
+
+
+def _chain_graph(false_edge: bool) -> tuple[dict, list, list]:
+    truth = {k: T_from_xyyaw(1.0 * k, 0.1 * k, 0.05 * k) for k in range(4)}
+    truth[10] = T_from_xyyaw(0.5, 1.0, 0.3)
+    odo = info_diag([0.01, 0.01, 0.08], [0.15, 0.15, 0.01])
+    reg = info_diag([0.005] * 3, [0.02] * 3)
+    priors = [Prior(0, truth[0], info_diag([1e-3] * 3, [1e-3] * 3)),
+              Prior(10, truth[10], info_diag([1e-3] * 3, [1e-3] * 3))]
+    edges = [Between(k, k + 1, invert(truth[k]) @ truth[k + 1], odo, False) for k in range(3)]
+    edges += [Between(10, k, invert(truth[10]) @ truth[k], reg, True) for k in (1, 2, 3)]
+    if false_edge:  # a confident wrong registration: 0.6 m and 12° off
+        bad = invert(truth[10]) @ truth[2] @ T_from_xyyaw(0.6, -0.2, 0.2)
+        edges.append(Between(10, 2, bad, reg, True))
+    initial = {k: T @ T_from_xyyaw(0.2, -0.1, 0.05) for k, T in truth.items()}
+    return truth, edges, [priors, initial]
+
+
+def test_false_registration_edge_rejected() -> None:
+    truth, edges, (priors, initial) = _chain_graph(false_edge=True)
+    result = optimize(initial, priors, edges)
+    assert result.inlier[-1] is False and all(result.inlier[:-1])
+    for k, T in truth.items():
+        dt, dr = pose_change(result.poses[k], T)
+        assert dt < 0.005 and dr < 0.002
+    # without the robust stages the same edge bends the map
+    plain = [Between(e.a, e.b, e.T_a_b, e.info, False) for e in edges]
+    bent = optimize(initial, priors, plain)
+    assert pose_change(bent.poses[2], truth[2])[0] > 0.1
+
+
+def test_left_to_right_information() -> None:
+    """A left-perturbation covariance maps to the right one by Ad(T⁻¹): Λ_r = Ad(T)ᵀ Λ_l Ad(T)."""
+    rng = np.random.default_rng(1)
+    T = T_from_xyyaw(1.0, -2.0, 0.7)
+    A = rng.normal(size=(6, 6))
+    info_left = A @ A.T + 6 * np.eye(6)
+    info_right = left_to_right_info(info_left, T)
+    ad_inv = Pose3(T).inverse().AdjointMap()  # Exp(ξ)·T = T·Exp(Ad(T⁻¹)ξ)
+    cov_right = ad_inv @ np.linalg.inv(info_left) @ ad_inv.T
+    assert np.allclose(np.linalg.inv(info_right), cov_right)
