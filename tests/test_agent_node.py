@@ -24,13 +24,43 @@ class FakeBus:
 
 
 def test_handle_odometry_publishes_pose_then_cmd_vel_on_own_keys() -> None:
-    bus, core = FakeBus(), AgentCore(AgentConfig(), 3, 0.1)
+    bus, core, pending = FakeBus(), AgentCore(AgentConfig(), 3, 0.1), []
     other = RobotPose(robot_id=1, tick=0, stamp_ns=0, pose_world=Pose2D(x=1.0, y=0.0, yaw=0.0))
-    handle(bus, core, Inbound("spacemap/robot/1/pose", other), 0.1)  # type: ignore[arg-type]
-    odom = Odometry(robot_id=3, tick=5, stamp_ns=5, pose_odom=Pose2D(x=0.0, y=0.0, yaw=0.0),
-                    v_mps=0.0, omega_radps=0.0)
-    handle(bus, core, Inbound("spacemap/robot/3/odom", odom), 0.1)  # type: ignore[arg-type]
+    handle(bus, core, Inbound("spacemap/robot/1/pose", other), 0.1, pending)  # type: ignore[arg-type]
+    odom = Odometry(
+        robot_id=3,
+        tick=5,
+        stamp_ns=5,
+        pose_odom=Pose2D(x=0.0, y=0.0, yaw=0.0),
+        v_mps=0.0,
+        omega_radps=0.0,
+    )
+    handle(bus, core, Inbound("spacemap/robot/3/odom", odom), 0.1, pending)  # type: ignore[arg-type]
     keys = [k for k, _ in bus.sent]
     assert keys == ["spacemap/robot/3/pose", "spacemap/robot/3/cmd_vel"]
     assert bus.sent[-1][1].tick == 5 and 1 in core.teammates
     assert np.isclose(bus.sent[-1][1].omega_radps, AgentConfig().spin_omega_radps)
+
+
+def test_messages_of_the_same_tick_wait_for_the_next_tick() -> None:
+    """A teammate's pose made at tick k races our Odometry(k): it is applied at k + 1 only,
+    whichever arrives first, so lockstep runs repeat exactly."""
+    bus, core, pending = FakeBus(), AgentCore(AgentConfig(), 3, 0.1), []
+
+    def odom(tick: int) -> Inbound:
+        msg = Odometry(
+            robot_id=3,
+            tick=tick,
+            stamp_ns=tick,
+            v_mps=0.0,
+            omega_radps=0.0,
+            pose_odom=Pose2D(x=0.0, y=0.0, yaw=0.0),
+        )
+        return Inbound("spacemap/robot/3/odom", msg)
+
+    same_tick = RobotPose(robot_id=1, tick=5, stamp_ns=5, pose_world=Pose2D(x=1.0, y=0.0, yaw=0.0))
+    handle(bus, core, Inbound("spacemap/robot/1/pose", same_tick), 0.1, pending)  # type: ignore[arg-type]
+    handle(bus, core, odom(5), 0.1, pending)  # type: ignore[arg-type]
+    assert 1 not in core.teammates and len(pending) == 1
+    handle(bus, core, odom(6), 0.1, pending)  # type: ignore[arg-type]
+    assert 1 in core.teammates and pending == []

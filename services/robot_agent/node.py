@@ -10,6 +10,7 @@ from schemas.messages import (
     Correction,
     Goal,
     Inventory,
+    Message,
     OccupancyGrid,
     Odometry,
     RgbdFrame,
@@ -49,16 +50,30 @@ def _out_key(bus: Bus, robot_id: int, topic: str) -> str:
     return by_topic[topic](robot_id)
 
 
-def handle(bus: Bus, core: AgentCore, item: Inbound | Presence, tick_s: float) -> None:
+# Messages stamped with the tick they were made at. One made at tick k by the edge or a
+# teammate races this agent's Odometry(k), but always arrives before Odometry(k + 1) (the sim
+# waits for every answer to k first), so applying them only at a later tick is deterministic.
+TICKED = (Goal, Correction, OccupancyGrid, RobotPose)
+
+
+def handle(
+    bus: Bus, core: AgentCore, item: Inbound | Presence, tick_s: float, pending: list[Message]
+) -> None:
     """Feed one inbound item to the core; on Odometry(k), publish the tick's outputs."""
     if isinstance(item, Presence):
         if item.role == "edge":
             core.on_edge_presence(item.alive)
         return
     msg = item.message
-    if isinstance(msg, RgbdFrame):
+    if isinstance(msg, TICKED):
+        pending.append(msg)
+    elif isinstance(msg, RgbdFrame):
         core.on_rgbd(msg)
     elif isinstance(msg, Odometry):
+        due = [m for m in pending if m.tick < msg.tick]  # type: ignore[attr-defined]
+        pending[:] = [m for m in pending if m.tick >= msg.tick]  # type: ignore[attr-defined]
+        for earlier in due:
+            _apply(core, earlier)
         for out in core.on_odometry(msg):  # CmdVel(k) is last
             bus.publish(_out_key(bus, core.robot_id, out.topic), out.message)
         if msg.tick and msg.tick % REPORT_EVERY_TICKS == 0:
@@ -66,7 +81,10 @@ def handle(bus: Bus, core: AgentCore, item: Inbound | Presence, tick_s: float) -
             key = bus.keys.submap(core.robot_id)
             log.info("robot %d tick %d: submap traffic %.1f kB per sim second",
                      core.robot_id, msg.tick, bus.bytes_out[key] / 1000.0 / sim_s)
-    elif isinstance(msg, Goal):
+
+
+def _apply(core: AgentCore, msg: Message) -> None:
+    if isinstance(msg, Goal):
         core.on_goal(msg)
     elif isinstance(msg, Correction):
         core.on_correction(msg)
@@ -83,6 +101,7 @@ def main(config: SpacemapConfig, robot_id: int) -> None:
     core = AgentCore(config.agent, robot_id, config.sim.tick_s)
     with connect(config.bus) as bus:
         lock = threading.Lock()  # the inventory queryable runs on a zenoh thread
+        pending: list[Message] = []
         last_tick = [0]
 
         def answer_inventory(_body: bytes) -> Inventory:
@@ -98,7 +117,7 @@ def main(config: SpacemapConfig, robot_id: int) -> None:
             item = bus.poll(timeout=POLL_S)
             if item is not None:
                 with lock:
-                    handle(bus, core, item, config.sim.tick_s)
+                    handle(bus, core, item, config.sim.tick_s, pending)
                 if isinstance(item, Inbound) and isinstance(item.message, Odometry):
                     last_tick[0] = item.message.tick
     log.info("agent %d stopped", robot_id)
