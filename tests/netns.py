@@ -58,7 +58,7 @@ class Hosts:
 
 
 @contextmanager
-def test_hosts(names: list[str]) -> Iterator[Hosts]:
+def make_hosts(names: list[str]) -> Iterator[Hosts]:
     """Create one namespace per name on a shared bridge; remove them all afterwards."""
     tag = f"sm{os.getpid() % 100000}"
     hosts = Hosts(tag=tag, subnet=(os.getpid() % 200) + 20)

@@ -32,13 +32,14 @@ def query_inventory(bus: Bus, key: str, timeout_s: float) -> Inventory | None:
 
 
 def collect_inventories(config: BusConfig, robots: int, timeout_s: float) -> dict[str, Any]:
-    """{"edge": {robot: {"epoch/submap": voxels}}, "agents": {robot: {...}}} (None = silent)."""
+    """{"edge": {robot: {"epoch/submap": voxels}}, "agents": {robot: {"epoch/submap": voxels}}}
+    (None where a process did not answer)."""
     with connect(config) as bus:
         edge = as_json(query_inventory(bus, bus.keys.map_inventory(), timeout_s))
-        agents = {
-            str(r): as_json(query_inventory(bus, bus.keys.inventory(r), timeout_s))
-            for r in range(robots)
-        }
+        agents = {}
+        for r in range(robots):
+            own = as_json(query_inventory(bus, bus.keys.inventory(r), timeout_s))
+            agents[str(r)] = None if own is None else own.get(str(r), {})
     return {"edge": edge, "agents": agents}
 
 

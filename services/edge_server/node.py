@@ -23,12 +23,14 @@ from schemas.messages import (
     EdgeAck,
     GoalStatus,
     GridRequest,
+    Inventory,
     OccupancyGrid,
     RobotPose,
     Submap,
 )
 from services.common.bus import Bus, Inbound, Presence, connect
 from services.common.config import SpacemapConfig
+from services.common.inventory import inventory_of
 from services.edge_server.planner import EdgePlanner, PlanOutput
 
 log = logging.getLogger(__name__)
@@ -94,6 +96,15 @@ class EdgeNode:
         with self.lock:
             return cloud_reply(self.planner, self.last_tick, body, self.config.bus.max_array_bytes)
 
+    def serve_inventory(self, _body: bytes) -> Inventory:
+        """Every submap merged so far, per robot (issue 7's nothing-lost check)."""
+        with self.lock:
+            items: dict[int, list[tuple[int, int, int]]] = {}
+            for sub in self.planner.store.ordered():
+                items.setdefault(sub.robot_id, []).append(
+                    (sub.epoch, sub.submap_id, len(sub.keys)))
+            return inventory_of(items, self.last_tick)
+
     def serve_robot_grid(self, body: bytes) -> OccupancyGrid:
         with self.lock:
             return robot_grid_reply(self.planner, self.last_tick, body,
@@ -151,6 +162,7 @@ def main(config: SpacemapConfig) -> None:
         _subscribe(bus)
         bus.serve(bus.keys.map_cloud(), node.serve_cloud)
         bus.serve(bus.keys.map_robot_grid(), node.serve_robot_grid)
+        bus.serve(bus.keys.map_inventory(), node.serve_inventory)
         bus.declare_alive("edge", 0)
         log.info("edge up on %s, planner %s", config.bus.connect, config.edge.planner)
         complete_logged = False

@@ -89,6 +89,8 @@ class SimNode:
         elif p.role == "agent" and p.ident.isdigit() and int(p.ident) < self.sim.n_robots:
             i = int(p.ident)
             if p.alive:
+                if i not in self.live_agents:
+                    log.info("agent %d alive: waited for from the next tick", i)
                 self.joining.add(i)
             else:
                 self.joining.discard(i)

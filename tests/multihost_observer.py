@@ -1,0 +1,41 @@
+"""Observer for the multi-host test: runs inside a test host and prints the mission's state as
+JSON lines (sim time, live processes, completion) to stdout, until stdin closes."""
+
+from __future__ import annotations
+
+import json
+import sys
+import threading
+
+from schemas.messages import Clock, Frontiers
+from services.common.bus import BusConfig, Inbound, Presence, connect
+
+
+def main(endpoint: str) -> None:
+    stop = threading.Event()
+    threading.Thread(target=lambda: (sys.stdin.read(), stop.set()), daemon=True).start()
+    state: dict[str, object] = {"t": 0.0, "alive": [], "complete": False}
+    alive: set[str] = set()
+    with connect(BusConfig(connect=endpoint, lease_s=2.0)) as bus:
+        bus.subscribe(bus.keys.clock(), Clock)
+        bus.subscribe(bus.keys.map_frontiers(), Frontiers)
+        bus.watch_liveliness()
+        last = None
+        while not stop.is_set():
+            item = bus.poll(timeout=0.2)
+            if isinstance(item, Presence):
+                name = f"{item.role}/{item.ident}"
+                alive.add(name) if item.alive else alive.discard(name)
+                state["alive"] = sorted(alive)
+            elif isinstance(item, Inbound) and isinstance(item.message, Clock):
+                state["t"] = round(item.message.stamp_ns * 1e-9, 1)
+            elif isinstance(item, Inbound) and isinstance(item.message, Frontiers):
+                state["complete"] = state["complete"] or item.message.complete
+            line = json.dumps(state, sort_keys=True)
+            if line != last:
+                print(line, flush=True)
+                last = line
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])

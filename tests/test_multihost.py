@@ -1,0 +1,156 @@
+"""Across hosts (issue 7): router and edge, simulator, two agents and an observer on separate
+test hosts (network namespaces on one bridge). A mission runs; one agent's link is cut and
+restored; another agent is SIGKILLed and restarted; nothing any agent mapped is lost."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from services.common.config import load_config, write_config
+from services.common.inventory import missing_submaps
+from services.processes import ProcessGroup, spacemap_command
+from tests.conftest import REPO, processes_tagged
+from tests.netns import Hosts, make_hosts, netns_available
+
+pytestmark = pytest.mark.multiprocess
+
+HOSTS = ["core", "simh", "a0", "a1", "obs"]
+
+
+class Observer:
+    """Reads the observer's JSON lines (tests/multihost_observer.py) in the background."""
+
+    def __init__(self, proc: subprocess.Popen[str]) -> None:
+        self.proc = proc
+        self.state: dict[str, Any] = {"t": 0.0, "alive": [], "complete": False}
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.state = json.loads(line)
+
+    @property
+    def t(self) -> float:
+        return float(self.state["t"])
+
+    def alive(self, name: str) -> bool:
+        return name in self.state["alive"]
+
+
+def wait_for(cond: Callable[[], bool], timeout_s: float, what: str, group: ProcessGroup) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if cond():
+            return
+        dead = {n: c for n, c in group.dead().items() if n not in ("agent1", "recorder")}
+        assert not dead, f"died while waiting for {what}: {dead}"
+        time.sleep(0.1)
+    raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+
+
+def inventories(hosts: Hosts, endpoint: str) -> dict[str, Any]:
+    out = subprocess.run(
+        hosts.exec_prefix("obs") + spacemap_command(
+            "inventory", "--robots", "2", "--connect", endpoint, "--timeout", "5"),
+        cwd=REPO, capture_output=True, text=True, timeout=60, check=True,
+    )
+    return json.loads(out.stdout)
+
+
+def lost(inv: dict[str, Any], robot: int, produced: dict[str, int] | None = None) -> dict:
+    produced = produced if produced is not None else inv["agents"][str(robot)]
+    assert produced, f"agent {robot} reported no submaps"
+    merged = (inv["edge"] or {}).get(str(robot), {})
+    return missing_submaps(produced, merged)
+
+
+@pytest.fixture
+def hosts() -> Any:
+    reason = netns_available()
+    if reason is not None and os.geteuid() != 0:
+        pytest.skip(f"multi-host test needs network namespaces: {reason}")
+    assert reason is None, reason
+    with make_hosts(HOSTS) as made:
+        yield made
+
+
+def test_mission_across_hosts_survives_a_cut_link_and_a_killed_agent(
+    hosts: Hosts, tmp_path: Path
+) -> None:
+    endpoint = f"tcp/{hosts.address['core']}:7447"
+    config = load_config(overrides={
+        "bus.connect": endpoint, "bus.lease_s": 2.0, "sim.robots": 2, "sim.seed": 5,
+        "sim.max_sim_time_s": 80.0,
+    })
+    cfg_path = tmp_path / "config.yaml"
+    write_config(config, cfg_path)
+    cfg = ["--config", str(cfg_path)]
+    group = ProcessGroup(tmp_path / "logs")
+
+    def start(name: str, host: str, *argv: str) -> None:
+        group.start(name, hosts.exec_prefix(host) + spacemap_command(*argv))
+
+    try:
+        start("router", "core", "router", "--listen", endpoint, "--lease", "2")
+        start("edge", "core", "edge", *cfg)
+        start("agent0", "a0", "agent", "--robot", "0", *cfg)
+        start("agent1", "a1", "agent", "--robot", "1", *cfg)
+        start("recorder", "obs", "record", "--out", str(tmp_path / "run"), "--sample-every",
+              "0", *cfg)
+        start("sim", "simh", "sim", *cfg)
+        observer = Observer(subprocess.Popen(
+            hosts.exec_prefix("obs") + [sys.executable, str(REPO / "tests/multihost_observer.py"),
+                                        endpoint],
+            cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+        ))
+        wait_for(lambda: observer.t >= 5.0, 180, "5 s of sim time", group)
+
+        # Cut agent 0's link: the router declares it gone, the mission goes on without it.
+        hosts.link("a0", up=False)
+        wait_for(lambda: not observer.alive("agent/0"), 15, "agent 0 declared gone", group)
+        t_cut = observer.t
+        wait_for(lambda: observer.t >= t_cut + 10.0, 60, "10 s of sim without agent 0", group)
+        hosts.link("a0", up=True)
+        wait_for(lambda: observer.alive("agent/0"), 60, "agent 0 back", group)
+        t_back = observer.t
+        wait_for(lambda: observer.t >= t_back + 3.0, 60, "3 s with agent 0 back", group)
+        wait_for(lambda: not lost(inventories(hosts, endpoint), 0), 60,
+                 "every submap of agent 0 at the edge", group)
+
+        # SIGKILL agent 1 and restart it (a new epoch): its old submaps must stay.
+        before_kill = inventories(hosts, endpoint)["agents"]["1"]
+        group.children["agent1"].kill()
+        wait_for(lambda: not observer.alive("agent/1"), 2.0, "agent 1 gone within 2 s", group)
+        start("agent1b", "a1", "agent", "--robot", "1", *cfg)
+        wait_for(lambda: observer.alive("agent/1"), 60, "agent 1 restarted", group)
+        t_restart = observer.t
+        wait_for(lambda: observer.t >= t_restart + 3.0, 60, "3 s with the new agent 1", group)
+
+        wait_for(lambda: group.children["recorder"].poll() is not None, 300,
+                 "the mission's end (recorder exits)", group)
+        assert group.children["recorder"].returncode == 0, (tmp_path / "logs/recorder.log")
+        final = inventories(hosts, endpoint)
+        assert lost(final, 0) == {}, "agent 0 lost submaps"
+        assert lost(final, 1) == {}, "restarted agent 1 lost submaps"
+        assert lost(final, 1, before_kill) == {}, "agent 1's first life lost submaps"
+        assert len(final["edge"]["1"]) > len(final["agents"]["1"]), "first life missing"
+        metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+        assert metrics["robots"] == 2 and metrics["coverage_2d_pct"] > 20.0
+    finally:
+        codes = group.stop(order=["sim", "recorder", "edge"])
+        if "observer" in locals():
+            observer.proc.communicate(timeout=10)
+    assert processes_tagged(tmp_path / "logs") == [], "processes left behind"
+    killed = {"agent1"}
+    assert all(c == 0 for n, c in codes.items() if n not in killed), codes
