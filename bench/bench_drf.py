@@ -79,7 +79,7 @@ def run_scene(ticks: int, agent_cfg: AgentConfig, record: bool) -> RunResult:
     """Run the scripted scene once with one AgentCore per robot."""
     cfg = SimConfig(world="house", robots=3, spawn=SPAWNS, seed=0)
     sim = Simulation(cfg)
-    cores = [AgentCore(agent_cfg, i, cfg.tick_s) for i in range(3)]
+    cores = [AgentCore(agent_cfg, i, cfg.tick_s, team_size=2) for i in range(3)]
     robot_geoms = [np.array(r.geoms) for r in sim.robots]
     est = [s for s in SPAWNS]
     frames: list[FrameRecord] = []
@@ -89,9 +89,9 @@ def run_scene(ticks: int, agent_cfg: AgentConfig, record: bool) -> RunResult:
         prev_est = list(est)
         for i, core in enumerate(cores):
             for j in range(3):
-                if j != i:
+                if j != i and k > 0:  # as in missions: poses of tick k − 1 (node.TICKED)
                     x, y, yaw = prev_est[j]
-                    core.on_pose(RobotPose(robot_id=j, tick=max(k - 1, 0), stamp_ns=0,
+                    core.on_pose(RobotPose(robot_id=j, tick=k - 1, stamp_ns=0,
                                            pose_world=Pose2D(x=x, y=y, yaw=yaw)))
             if camera:
                 img = sim.render(i, segmentation=True)

@@ -45,6 +45,7 @@ from services.robot_agent.local_map import KeyframeMapper, SubmapDelta
 from services.robot_agent.localization import FrameRegistrar, RegistrationParams, planar
 from services.robot_agent.navigation import Command, Navigator, StatusEvent, inflation_cells
 from services.robot_agent.projection import cam_to_base, depth_to_points, pixel_colors
+from services.robot_agent.teammates import predict_xy
 
 log = logging.getLogger(__name__)
 
@@ -84,16 +85,19 @@ def drf_params(cfg: AgentConfig) -> DrfParams:
     return DrfParams(
         c=cfg.drf_c, radius_m=cfg.robot_size_m, robot_top_m=cfg.robot_top_m,
         floor_z_m=0.012, eps_m=cfg.drf_eps_m, min_points=cfg.drf_min_points,
-        voxel_m=cfg.drf_voxel_m,
+        voxel_m=cfg.drf_voxel_m, margin_m=cfg.drf_margin_m,
     )
 
 
 class AgentCore:
     """Local mapping, pose estimate and navigation of robot `robot_id`."""
 
-    def __init__(self, config: AgentConfig, robot_id: int, tick_s: float) -> None:
+    def __init__(
+        self, config: AgentConfig, robot_id: int, tick_s: float, team_size: int = 0
+    ) -> None:
         self.config = config
         self.robot_id = robot_id
+        self.team_size = team_size  # teammates (robots − 1) whose poses mapping waits for
         self.frame: RgbdFrame | None = None
         self.goal: Goal | None = None
         self.cancels: list[int] = []
@@ -104,10 +108,16 @@ class AgentCore:
         self.grid: LocalGrid | None = None
         self.edge_grid: OccupancyGrid | None = None
         self.mapper = KeyframeMapper(config)
-        self.registrar = FrameRegistrar(RegistrationParams())
+        self.registrar = FrameRegistrar(RegistrationParams(
+            step_m=config.reg_step_m, step_per_m=config.reg_step_per_m,
+            step_rad=config.reg_step_rad,
+            min_inlier_frac=config.reg_min_inlier_frac, map_horizon=config.reg_map_horizon,
+        ))
         self.n_frames = 0
         self.nav = Navigator(config, tick_s)
         self.teammates: dict[int, RobotPose] = {}
+        self.teammates_prev: dict[int, RobotPose] = {}  # the one before, for the velocity
+        self.frames_skipped = 0  # frames dropped while waiting for the team's poses
         self.drf = drf_params(config)
         self.last_drf: DrfRecord | None = None
         self.edge_alive = True  # assumed until its liveliness token is seen to go
@@ -134,8 +144,20 @@ class AgentCore:
             self.grid.merge_edge(grid)
 
     def on_pose(self, pose: RobotPose) -> None:
-        if pose.robot_id != self.robot_id:
-            self.teammates[pose.robot_id] = pose
+        if pose.robot_id == self.robot_id:
+            return
+        last = self.teammates.get(pose.robot_id)
+        if last is not None and last.tick < pose.tick:
+            self.teammates_prev[pose.robot_id] = last
+        self.teammates[pose.robot_id] = pose
+
+    def team_ready(self, tick: int) -> bool:
+        """Every teammate's pose is known (so the DRF can remove it), or the bounded wait
+        is over (a teammate that never came up must not block mapping forever)."""
+        if not self.config.drf:
+            return True  # standalone maps teammates anyway: nothing to wait for
+        waited = tick - (self.epoch if self.epoch is not None else tick)
+        return len(self.teammates) >= self.team_size or waited >= self.config.map_wait_ticks
 
     def inventory(self, tick: int) -> Inventory:
         """The submaps this agent process produced and published (issue 7's nothing-lost
@@ -173,11 +195,14 @@ class AgentCore:
             self.resend_pending = False
         frame = self.frame if self.frame is not None and self.frame.tick <= odom.tick else None
         self.frame = None if frame is not None else self.frame
+        if frame is not None and not self.team_ready(odom.tick):
+            frame = None  # a teammate of unknown pose would be mapped as a ghost
+            self.frames_skipped += 1
         T_loc_base = self.T_loc_odom @ T_odom_base
         points_base = cam = None
         if frame is not None:
             cam, points_base = self._filtered_points(frame, T_loc_base, odom.tick)
-            T_loc_base = self._register(points_base, T_odom_base)
+            T_loc_base = self._register(points_base, T_odom_base, self._drf_removed_frac(frame))
         T_world_base = self.T_world_loc @ T_loc_base
         pose_world = xyyaw_from_T(T_world_base)
         self._ensure_grid(pose_world)
@@ -188,8 +213,29 @@ class AgentCore:
             deltas += [delta] if delta is not None else []
         events = self._navigate_goal_inputs(pose_world, odom.tick)
         cmd, event = self.nav.step(pose_world, self.grid, odom.tick)
+        cmd = self._yield_to_teammates(pose_world, cmd, odom.tick)
         events += [event] if event is not None else []
         return self._outputs(odom, pose_world, deltas, events, cmd)
+
+    def _yield_to_teammates(self, pose_world: tuple[float, float, float], cmd: Command,
+                            tick: int) -> Command:
+        """No forward motion into a teammate just ahead (turning still allowed).
+
+        The DRF keeps teammates out of the map and so out of the grid the planner avoids;
+        without this two robots pushed into each other for a minute in a mission."""
+        cfg = self.config
+        if cmd.v_mps <= 0.0:
+            return cmd
+        for rid, p in sorted(self.teammates.items()):
+            if tick - p.tick > cfg.teammate_max_age_ticks:
+                continue
+            rel = predict_xy(p, self.teammates_prev.get(rid), tick, cfg.predict_max_ticks) - \
+                np.array(pose_world[:2])
+            bearing = math.atan2(rel[1], rel[0]) - pose_world[2]
+            bearing = math.atan2(math.sin(bearing), math.cos(bearing))
+            if np.hypot(*rel) < cfg.yield_dist_m and abs(bearing) < cfg.yield_half_angle_rad:
+                return Command(0.0, cmd.omega_radps)
+        return cmd
 
     def _ensure_grid(self, pose_world: tuple[float, float, float]) -> None:
         if self.grid is None:
@@ -238,11 +284,12 @@ class AgentCore:
                            tick: int) -> np.ndarray:
         """(N, 2) world xy of fresh teammate estimates that mutual awareness puts in view."""
         cfg = self.config
-        fresh = [p.pose_world for p in self.teammates.values()
+        fresh = [predict_xy(p, self.teammates_prev.get(rid), tick, cfg.predict_max_ticks)
+                 for rid, p in sorted(self.teammates.items())
                  if tick - p.tick <= cfg.teammate_max_age_ticks]
         if not fresh:
             return np.empty((0, 2))
-        xy = np.array([[p.x, p.y] for p in fresh])
+        xy = np.array(fresh)
         test = visible_paper if cfg.awareness == "paper" else in_view_partial
         seen = test(pose_world, xy, radius_m=cfg.robot_size_m,
                     fov_rad=hfov_of(frame.K, frame.depth_m.shape[1]),
@@ -264,13 +311,26 @@ class AgentCore:
         cam = depth_to_points(depth, frame.K, self.config.pixel_stride, frame.range_max_m)
         return cam, cam_to_base(cam.points_cam, frame.T_base_cam)
 
-    def _register(self, points_base: np.ndarray, T_odom_base: np.ndarray) -> np.ndarray:
-        """Registered T_loc_base (or the odometry guess); T_loc_odom takes up the drift found."""
+    def _drf_removed_frac(self, frame: RgbdFrame) -> float:
+        """Share of the frame's valid pixels the DRF removed (a teammate close to the lens)."""
+        if self.last_drf is None or self.last_drf.tick != frame.tick:
+            return 0.0
+        valid = int(np.count_nonzero(frame.depth_m > 0))
+        return float(np.count_nonzero(self.last_drf.mask)) / max(valid, 1)
+
+    def _register(self, points_base: np.ndarray, T_odom_base: np.ndarray,
+                  removed_frac: float = 0.0) -> np.ndarray:
+        """Registered T_loc_base (or the odometry guess); T_loc_odom takes up the drift found.
+
+        A frame mostly hidden by a teammate keeps the odometry guess: what is left is a sliver
+        of the scene GICP can slide on."""
         guess = self.T_loc_odom @ T_odom_base
         self.n_frames += 1
         if not self.config.registration or (self.n_frames - 1) % self.config.register_every_frames:
             return guess
-        outcome = self.registrar.register(points_base, guess)
+        if removed_frac > self.config.reg_max_removed_frac:
+            return guess
+        outcome = self.registrar.register(points_base, guess, T_odom_base)
         # planar() re-orthonormalises, so rounding cannot pile up over thousands of frames
         self.T_loc_odom = planar(outcome.T_loc_base @ invert(T_odom_base))
         return outcome.T_loc_base

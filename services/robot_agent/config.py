@@ -28,9 +28,30 @@ class AgentConfig(BaseModel):
     drf_min_points: int = Field(default=1, ge=1)
     drf_voxel_m: float = Field(default=0.03, gt=0, description="voxelize before DBSCAN")
     teammate_max_age_ticks: int = Field(default=30, ge=1, description="older estimates unused")
+    drf_margin_m: float = Field(
+        default=0.12, ge=0, description="footprint grown by this is removed whatever DBSCAN says"
+    )
+    predict_max_ticks: int = Field(
+        default=3, ge=0, description="extrapolate a teammate's last motion at most this far"
+    )
+    map_wait_ticks: int = Field(
+        default=20, ge=0, description="map nothing until every teammate's pose is known, or this"
+    )
     # -- localization ----------------------------------------------------------------------
     registration: bool = Field(default=True, description="refine odometry by frame-to-map GICP")
     register_every_frames: int = Field(default=1, ge=1)
+    reg_step_m: float = Field(
+        default=0.02, gt=0, description="accepted correction: base + per metre (localization.py)"
+    )
+    reg_step_per_m: float = Field(default=0.06, ge=0)
+    reg_step_rad: float = Field(default=0.02, gt=0)
+    reg_max_removed_frac: float = Field(
+        default=0.2, ge=0, le=1, description="no registration when the DRF took more of a frame"
+    )
+    reg_min_inlier_frac: float = Field(default=0.5, ge=0, le=1)
+    reg_map_horizon: int = Field(
+        default=100, ge=1, description="registered frames a map voxel survives unobserved"
+    )
     voxel_m: float = Field(default=0.05, gt=0)
     max_v_mps: float = Field(default=0.5, gt=0)
     max_omega_radps: float = Field(default=math.pi / 4, gt=0)
@@ -68,6 +89,10 @@ class AgentConfig(BaseModel):
     )
     k_omega: float = Field(default=1.5, gt=0, description="turn-in-place gain, 1/s")
     spin_omega_radps: float = Field(default=0.4, ge=0, description="rotation while idle")
+    yield_dist_m: float = Field(
+        default=0.7, ge=0, description="stop driving when a teammate centre is this close ahead"
+    )
+    yield_half_angle_rad: float = Field(default=math.pi / 3, ge=0)
     validator_beta: int = Field(default=20, ge=1, description="β: path points in the window")
     validator_slack_s: float = Field(
         default=4.0, ge=0, description="added to Σ t_e over the window (acceleration, slow-down)"

@@ -13,6 +13,11 @@ For each teammate that mutual awareness puts in view:
    expected position whose horizontal extent fits the robot (diagonal ≤ 2R + 2 voxels). "Every"
    because a TurtleBot seen from the front is two clusters (chassis face, mast 0.14 m behind);
    the size test keeps walls and furniture that reach into the box.
+5. spacemap's addition: every box point within the robot's footprint (half-diagonal) grown by the
+   pose uncertainty `margin_m` of the expected position is removed too, whatever DBSCAN made of
+   it. In missions a teammate touching a wall or furniture (one cluster too big for the size
+   test) or split oddly at the image border leaked into the map; static points that close to a
+   teammate are seen again once it has moved on.
 
 Everything is pure numpy + Open3D on one frame; the caller zeroes the returned pixel mask, so
 only filtered depth reaches the map.
@@ -41,6 +46,8 @@ class DrfParams:
     eps_m: float = 0.08  # DBSCAN neighbourhood
     min_points: int = 1  # on voxel centres: connected components within eps
     voxel_m: float = 0.03  # voxelize box points before DBSCAN
+    footprint_m: float = 0.21  # half-diagonal of the 0.281 × 0.306 m chassis
+    margin_m: float = 0.12  # pose uncertainty around the footprint: removed unconditionally
 
 
 @dataclass(frozen=True)
@@ -108,6 +115,12 @@ def _in_box(points_base: np.ndarray, centre_base: np.ndarray, params: DrfParams)
     )
 
 
+def in_footprint(points_base: np.ndarray, centre_xy: np.ndarray, params: DrfParams) -> np.ndarray:
+    """(N,) bool: points within the footprint grown by the pose margin (box points only)."""
+    reach = params.footprint_m + params.margin_m
+    return np.hypot(*(points_base[:, :2] - centre_xy[None, :]).T) <= reach
+
+
 def robot_cluster(
     points_base: np.ndarray, centre_xy: np.ndarray, params: DrfParams
 ) -> np.ndarray:
@@ -155,5 +168,6 @@ def filter_mask(
         pts, flat = _window_points(depth_m, K, T_base_cam, rows, cols)
         box = _in_box(pts, centre, params)
         robot = robot_cluster(pts[box], centre[:2], params)
+        robot |= in_footprint(pts[box], centre[:2], params)
         mask.reshape(-1)[flat[box][robot]] = True
     return mask

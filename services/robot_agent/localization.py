@@ -8,6 +8,11 @@ so the edge's corrections (T_world_submap) give T_world_loc.
 
 Guards: too few points, no convergence, too few inliers, or a jump larger than odometry can
 plausibly drift between two registrations (a wall seen head-on lets GICP slide) keep the guess.
+The jump gate is the odometry error model: `step_m + step_per_m · d` and `step_rad +
+step_rad_per_rad · |Δψ| + step_rad_per_m · d`, with d and Δψ the odometry motion since the last
+*accepted* registration (so a run of rejections widens it as drift can grow). Missions showed the
+fixed 8 cm / 0.05 rad gate letting GICP slide 10 cm and 1.6° within a few frames in doorways
+(ghost walls 0.13 m off); real drift per 0.2 s frame is a few mm.
 """
 
 from __future__ import annotations
@@ -28,9 +33,15 @@ class RegistrationParams:
     max_iterations: int = 15
     min_points: int = 150
     min_inlier_frac: float = 0.5
-    max_step_m: float = 0.08  # largest accepted correction of the odometry guess
-    max_step_rad: float = 0.05
+    step_m: float = 0.02  # accepted correction of the odometry guess: base ...
+    step_per_m: float = 0.06  # ... + this per metre driven since the last accepted one (3 × 2 %)
+    step_rad: float = 0.02  # tighter lost yaw corrections in missions (2.6-4.4° error)
+    step_rad_per_rad: float = 0.03  # 3 × the 1 % turn-scale error
+    step_rad_per_m: float = 0.015  # 3 × the 0.005 rad/m heading bias
+    cap_m: float = 0.05  # the gate never grows past these: after a long run of rejections
+    cap_rad: float = 0.02  # (spinning) a wide gate let wrong 3-6° GICP yaws in (missions)
     floor_z_m: float = 0.03  # floor points carry no planar information: dropped
+    map_horizon: int = 100  # map voxels not re-observed in this many inserted frames are dropped
 
 
 @dataclass(frozen=True)
@@ -51,7 +62,10 @@ class FrameRegistrar:
     def __init__(self, params: RegistrationParams) -> None:
         self.params = params
         self.voxelmap = small_gicp.GaussianVoxelMap(params.map_voxel_m)
+        self.voxelmap.set_lru(params.map_horizon, 10)
         self.n_inserted = 0
+        self.T_odom_accepted: np.ndarray | None = None  # odometry at the last accepted one
+        self.n_accepted = 0
 
     def _cloud(self, points_base: np.ndarray) -> small_gicp.PointCloud | None:
         pts = points_base[points_base[:, 2] > self.params.floor_z_m]
@@ -63,21 +77,40 @@ class FrameRegistrar:
         )
         return cloud if cloud.size() >= self.params.min_points else None
 
+    def gate(self, T_odom_base: np.ndarray) -> tuple[float, float]:
+        """(m, rad) largest correction odometry drift can explain since the last acceptance."""
+        p = self.params
+        if self.T_odom_accepted is None:
+            return p.step_m, p.step_rad
+        dx, dy, dyaw = xyyaw_from_T(np.linalg.inv(self.T_odom_accepted) @ T_odom_base)
+        d = float(np.hypot(dx, dy))
+        return (min(p.cap_m, p.step_m + p.step_per_m * d),
+                min(p.cap_rad, p.step_rad + p.step_rad_per_rad * abs(wrap_angle(dyaw))
+                    + p.step_rad_per_m * d))
+
     def register(
-        self, points_base: np.ndarray, T_loc_base_guess: np.ndarray
+        self, points_base: np.ndarray, T_loc_base_guess: np.ndarray,
+        T_odom_base: np.ndarray | None = None,
     ) -> RegistrationOutcome:
-        """Refine the guess against the map, then add the frame at the pose used."""
+        """Refine the guess against the map, then add the frame at the pose used.
+
+        `T_odom_base` (the raw odometry) sizes the jump gate; without it the gate is the base."""
         cloud = self._cloud(points_base)
         if cloud is None:
             return RegistrationOutcome(T_loc_base_guess, False, "too few points")
         outcome = RegistrationOutcome(T_loc_base_guess, False, "empty map")
+        odom = T_loc_base_guess if T_odom_base is None else T_odom_base
         if self.n_inserted > 0:
-            outcome = self._align(cloud, T_loc_base_guess)
+            outcome = self._align(cloud, T_loc_base_guess, self.gate(odom))
+        if outcome.accepted or self.n_inserted == 0:
+            self.T_odom_accepted = odom.copy()
+            self.n_accepted += int(outcome.accepted)
         self.voxelmap.insert(cloud, outcome.T_loc_base)
         self.n_inserted += 1
         return outcome
 
-    def _align(self, cloud: small_gicp.PointCloud, guess: np.ndarray) -> RegistrationOutcome:
+    def _align(self, cloud: small_gicp.PointCloud, guess: np.ndarray,
+               gate: tuple[float, float]) -> RegistrationOutcome:
         p = self.params
         res = small_gicp.align(
             self.voxelmap, cloud, guess, max_correspondence_distance=p.max_corr_m,
@@ -89,6 +122,6 @@ class FrameRegistrar:
             return RegistrationOutcome(guess, False, "few inliers")
         T = planar(res.T_target_source)
         dx, dy, dyaw = xyyaw_from_T(np.linalg.inv(guess) @ T)
-        if np.hypot(dx, dy) > p.max_step_m or abs(wrap_angle(dyaw)) > p.max_step_rad:
+        if np.hypot(dx, dy) > gate[0] or abs(wrap_angle(dyaw)) > gate[1]:
             return RegistrationOutcome(guess, False, "implausible jump")
         return RegistrationOutcome(T, True)

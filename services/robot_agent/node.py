@@ -98,7 +98,7 @@ def main(config: SpacemapConfig, robot_id: int) -> None:
     """Run robot `robot_id`'s agent until SIGTERM or SIGINT."""
     stop = threading.Event()
     _install_stop_handlers(stop)
-    core = AgentCore(config.agent, robot_id, config.sim.tick_s)
+    core = AgentCore(config.agent, robot_id, config.sim.tick_s, team_size=config.sim.robots - 1)
     with connect(config.bus) as bus:
         lock = threading.Lock()  # the inventory queryable runs on a zenoh thread
         pending: list[Message] = []
