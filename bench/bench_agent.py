@@ -109,7 +109,7 @@ def main() -> None:
         core.nav.set_goal(Goal(robot_id=0, tick=0, goal_id=len(plan) + 1, x=gx, y=gy,
                                frontier_class="unexplored", revenue=1.0), 0)
         t0 = time.perf_counter()
-        core.nav._plan(core.grid, np.array(poses[-1][:2]), 0)
+        core.nav._plan(core.grid, tuple(poses[-1][:3]), 0)
         plan.append(time.perf_counter() - t0)
     stages["planning (A* incl. inflation, per replan)"] = plan
 
