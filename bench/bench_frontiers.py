@@ -7,6 +7,10 @@ centres), optionally cropped to z ≤ `--z-max`. Timed (medians of `--repeats`):
 - baseline: the paper's per-point loop with a scipy cKDTree (query_ball_point per point, then
   count and variance per point), the same cloud and r_s, timed once (it is slow).
 Both are checked to give the same ρ and σ².
+- incremental (what a plan runs, frontier_cache.py): the same map less `--new` voxels (a
+  contiguous run of the sorted keys: a patch of newly seen surface, ~ one edge tick's growth in
+  house missions) is loaded untimed, then the update that adds them and reads ρ, σ² for all
+  voxels (and for z ≤ 1.5 m, the frontier band the planner reads) is timed; checked equal.
 
 Run: .venv/bin/python bench/bench_frontiers.py [--repeats 7] [--density 400]
 """
@@ -21,7 +25,9 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
+from services.common.voxels import pack
 from services.edge_server.config import EdgeConfig
+from services.edge_server.frontier_cache import IncrementalFrontiers
 from services.edge_server.frontiers3d import detect_point_frontiers
 from services.evaluator.surfaces import surface_samples
 from services.simulator.worlds import load_world
@@ -55,6 +61,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--density", type=float, default=400.0)
     ap.add_argument("--z-max", type=float, default=2.0)
+    ap.add_argument("--new", type=int, default=3000, help="voxels added per incremental plan")
     args = ap.parse_args()
     cfg = EdgeConfig()
     points = house_map(args.density, args.z_max, cfg.frontier_voxel_m)
@@ -75,6 +82,22 @@ def main() -> None:
     t_loop = time.perf_counter() - t0
     assert np.array_equal(rho, pf.rho) and np.allclose(var, pf.var_m2, atol=1e-9)
     ms = 1000 * statistics.median(times)
+    keys = np.sort(pack(pf.indices))
+    start = len(keys) // 2
+    new = keys[start : start + args.new]
+    old = np.concatenate([keys[:start], keys[start + args.new :]])
+    inc_ms = {}
+    for z_max in (np.inf, cfg.frontier_z_max_m):
+        t_inc = []
+        for _ in range(args.repeats):
+            inc = IncrementalFrontiers(cfg.frontier_voxel_m, radius, cfg.density_threshold,
+                                       cfg.variance_threshold_m2, z_max)
+            inc.update(old)
+            t0 = time.perf_counter()
+            got = inc.update(keys, new)
+            t_inc.append(time.perf_counter() - t0)
+        inc_ms[z_max] = 1000 * statistics.median(t_inc)
+    assert np.array_equal(got.rho, pf.rho[pf.points_world[:, 2] <= cfg.frontier_z_max_m])
     log.info("house merged map: %d voxels (ϱ = %.2f m), r_s = %.2f m, %d F_u and %d F_w points",
              len(pf.rho), cfg.frontier_voxel_m, radius, int(pf.unexplored.sum()),
              int(pf.weak.sum()))
@@ -82,6 +105,9 @@ def main() -> None:
     log.info("| ours: lattice stencil, exact ρ + σ² (median of %d) | %.1f | 1× |", args.repeats, ms)
     log.info("| per-point cKDTree loop (once) | %.0f | %.1f× slower |", 1000 * t_loop,
              1000 * t_loop / ms)
+    for z_max, t in inc_ms.items():
+        log.info("| ours incremental: +%d voxels, read all with z ≤ %s m (median of %d) | %.1f "
+                 "| %.1f× faster |", len(new), z_max, args.repeats, t, ms / t)
 
 
 if __name__ == "__main__":

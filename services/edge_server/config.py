@@ -60,7 +60,8 @@ class EdgeConfig(BaseModel):
     seed: int = Field(default=0, description="mission seed (RRT sampling)")
     # map merger
     merge: bool = Field(default=False, description="pose graph + registration corrections "
-                        "(off by default: it lowered coverage in missions, docs/edge.md)")
+                        "(off by default: in missions it raised RMSE/BV, delayed completion "
+                        "and cost plan time, docs/edge.md)")
     max_registrations: int = Field(default=1, ge=0, description="pair registrations per plan")
     # assignment
     keep_radius_m: float = Field(
@@ -76,6 +77,13 @@ class EdgeConfig(BaseModel):
     weak_visited_ticks: int = Field(
         default=100000, ge=0, description="a reached F_w spot: revisiting would not improve it"
     )
+    blacklist_strikes: int = Field(
+        default=3, ge=1, description="the n-th invalid/unreachable/reached report at one place "
+        "sets it aside for good (a frontier that survives repeated visits cannot be cleared)")
+    weak_visit_range_m: float = Field(
+        default=2.0, ge=0, description="an F_w region inside a robot's FoV this close has been "
+        "looked at from close by and is no longer assignable (completion.py)")
+    weak_visit_fov_deg: float = Field(default=84.1, gt=0, le=360, description="camera FoV")
     # completion
     complete_after_plans: int = Field(
         default=3, ge=1, description="consecutive plans without a reachable frontier"

@@ -83,24 +83,34 @@ def _anchors(labels: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def detect_frontiers(
-    free: np.ndarray, known: np.ndarray, goal_ok: np.ndarray, spec: GridSpec, config: EdgeConfig
+    free: np.ndarray, known: np.ndarray, goal_ok: np.ndarray, spec: GridSpec, config: EdgeConfig,
+    goal_edt: GoalTransform | None = None,
 ) -> FrontierSet:
     """Frontier clusters of a grid and their goals f′, chosen among `goal_ok` cells."""
     return frontier_set(frontier_cells(free, known), goal_ok, spec, config.frontier_min_cells,
-                        config.goal_max_offset_m)
+                        config.goal_max_offset_m, goal_edt)
+
+
+GoalTransform = tuple[np.ndarray, np.ndarray]  # EDT of ~goal_ok: (offset, nearest indices)
+
+
+def goal_transform(goal_ok: np.ndarray) -> GoalTransform:
+    """For every cell, the distance to and index of the nearest allowed goal cell."""
+    return ndimage.distance_transform_edt(~goal_ok, return_indices=True)
 
 
 def frontier_set(
-    mask: np.ndarray, goal_ok: np.ndarray, spec: GridSpec, min_cells: int, max_offset_m: float
+    mask: np.ndarray, goal_ok: np.ndarray, spec: GridSpec, min_cells: int, max_offset_m: float,
+    goal_edt: GoalTransform | None = None,
 ) -> FrontierSet:
-    """8-connected clusters of `mask` (≥ min_cells) with goals f′ among `goal_ok` cells."""
+    """8-connected clusters of `mask` (≥ min_cells) with goals f′ among `goal_ok` cells
+    (`goal_edt`: `goal_transform(goal_ok)` when the caller already has it)."""
     labels, sizes = _clusters(mask, min_cells)
     n = int(sizes.size)
     if n == 0 or not goal_ok.any():
         return empty_frontiers(mask.shape)
     centroid_rc, anchor_rc = _anchors(labels, n)
-    # For every cell, the nearest allowed goal cell (one Euclidean distance transform).
-    offset, nearest = ndimage.distance_transform_edt(~goal_ok, return_indices=True)
+    offset, nearest = goal_edt if goal_edt is not None else goal_transform(goal_ok)
     goal_rc = np.stack([nearest[d][anchor_rc[:, 0], anchor_rc[:, 1]] for d in (0, 1)], axis=1)
     ok = offset[anchor_rc[:, 0], anchor_rc[:, 1]] * spec.resolution_m <= max_offset_m
     renumber = np.zeros(n + 1, np.int32)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from services.common.voxels import pack, unpack, voxel_indices
+from services.edge_server.arrays import unique_sorted
 
 CHUNK = 1024  # points per gather block: keeps the K×chunk block in cache
 
@@ -83,7 +84,7 @@ def detect_point_frontiers(
 ) -> PointFrontiers:
     """Alg. 1: downsample at ϱ = voxel_m, ρ and σ² within r_s, F_u = ρ < δ_d, F_w = σ² > δ_v."""
     points_world = np.asarray(points_world, np.float64).reshape(-1, 3)
-    keys = np.unique(pack(voxel_indices(points_world, voxel_m)))  # packed: fast unique
+    keys = unique_sorted(pack(voxel_indices(points_world, voxel_m)))
     return lattice_frontiers(unpack(keys), voxel_m, radius_m, delta_d, delta_v_m2)
 
 

@@ -6,7 +6,9 @@ still reach it and no other robot kept that frontier first. Goals reported inval
 unreachable set their place aside for `blacklist_ticks`; reached goals for
 `reached_blacklist_ticks` (a frontier the robot stood at but could not clear is not worth an
 immediate second trip); a reached F_w spot for `weak_visited_ticks` (it has been looked at
-from close by; a weak region that stays weak is not improved by a second visit). A robot whose
+from close by; a weak region that stays weak is not improved by a second visit). The
+`blacklist_strikes`-th report at one place sets it aside for good, so a frontier that no robot
+can clear stops holding completion back. A robot whose
 frontier vanished and that gets no other goal receives a cancel for its old goal.
 """
 
@@ -23,8 +25,11 @@ from services.common.grid import GridSpec
 from services.edge_server.assignment import Scorer, greedy_match
 from services.edge_server.config import EdgeConfig
 from services.edge_server.frontiers import FrontierSet
+from services.edge_server.robot_fields import RobotFields
 
 log = logging.getLogger(__name__)
+
+FOREVER_TICKS = 10**9
 
 
 @dataclass(frozen=True)
@@ -51,6 +56,7 @@ class GoalBook:
         self.active: dict[int, ActiveGoal] = {}
         self.issued: dict[int, tuple[float, float, bool]] = {}  # goal id → goal x, y, F_w?
         self.blacklist: list[tuple[float, float, int]] = []  # (x, y, expiry tick)
+        self.strikes: list[tuple[float, float]] = []  # every bad/reached report's place
         self.next_goal_id = 0
 
     # -- agent reports ---------------------------------------------------------------------
@@ -62,6 +68,11 @@ class GoalBook:
         ticks = self.config.blacklist_ticks
         if status.status == "reached":
             ticks = self.config.weak_visited_ticks if weak else self.config.reached_blacklist_ticks
+        r2 = self.config.blacklist_radius_m**2
+        n = 1 + sum((x - sx) ** 2 + (y - sy) ** 2 <= r2 for sx, sy in self.strikes)
+        self.strikes.append((x, y))
+        if n >= self.config.blacklist_strikes:  # keeps coming back: never clearable
+            ticks = FOREVER_TICKS
         if ticks > 0:
             self.blacklist.append((x, y, status.tick + ticks))
         current = self.active.get(status.robot_id)
@@ -89,14 +100,14 @@ class GoalBook:
         return ok
 
     def _kept(
-        self, robots: list[int], fields: dict[int, np.ndarray], frontiers: FrontierSet,
+        self, robots: list[int], fields: RobotFields, frontiers: FrontierSet,
         spec: GridSpec, usable: np.ndarray,
     ) -> dict[int, int]:
         """Robot → frontier index for goals that survive (hysteresis)."""
         kept: dict[int, int] = {}
         if not len(frontiers):
             return kept
-        dist, nearest = ndimage.distance_transform_edt(frontiers.labels == 0, return_indices=True)
+        k = int(np.ceil(self.config.keep_radius_m / spec.resolution_m)) + 1
         for robot in robots:
             goal = self.active.get(robot)
             if goal is None:
@@ -105,23 +116,34 @@ class GoalBook:
             grc = spec.cell_of(np.array([goal.goal_xy]))
             if not (spec.contains(rc)[0] and spec.contains(grc)[0]):
                 continue
-            (r, c), (gr, gc) = rc[0], grc[0]
-            if dist[r, c] * spec.resolution_m > self.config.keep_radius_m:
+            r, c = rc[0]
+            # nearest frontier cell to the old anchor: EDT on a window of the keep radius
+            r0, c0 = max(r - k, 0), max(c - k, 0)
+            window = frontiers.labels[r0 : r + k + 1, c0 : c + k + 1]
+            if not window.any():
                 continue
-            f = int(frontiers.labels[nearest[0][r, c], nearest[1][r, c]]) - 1
-            if usable[f] and f not in kept.values() and np.isfinite(fields[robot][gr, gc]):
+            dist, nearest = ndimage.distance_transform_edt(window == 0, return_indices=True)
+            if dist[r - r0, c - c0] * spec.resolution_m > self.config.keep_radius_m:
+                continue
+            f = int(window[nearest[0][r - r0, c - c0], nearest[1][r - r0, c - c0]]) - 1
+            if usable[f] and f not in kept.values() and fields.reaches(robot, grc)[0]:
                 kept[robot] = f
         return kept
 
     def plan(
-        self, tick: int, robots: list[int], fields: dict[int, np.ndarray],
+        self, tick: int, robots: list[int], fields: RobotFields,
         frontiers: FrontierSet, spec: GridSpec, scorer: Scorer,
     ) -> Assignment:
         """Keep surviving goals, give every other robot its best free frontier."""
-        reach = np.array([fields[r][frontiers.goal_rc[:, 0], frontiers.goal_rc[:, 1]]
-                          for r in robots]).reshape(len(robots), len(frontiers))
-        usable = self.allowed(frontiers, tick) & np.isfinite(reach).any(axis=0)
+        goal_rc = frontiers.goal_rc
+        usable = self.allowed(frontiers, tick) & fields.reachable[goal_rc[:, 0], goal_rc[:, 1]]
         kept = self._kept(robots, fields, frontiers, spec, usable)
+        # path lengths only for robots that need a goal (Dijkstra is the costly part of a plan)
+        need = [r for r in robots if r not in kept] if usable.any() else []
+        fields.compute(need)
+        reach = np.array([fields[r][goal_rc[:, 0], goal_rc[:, 1]] if r in need
+                          else np.full(len(frontiers), np.inf)
+                          for r in robots]).reshape(len(robots), len(frontiers))
         dropped = {r: self.active.pop(r) for r in sorted(self.active) if r not in kept}
         scores = scorer.score(reach * spec.resolution_m, frontiers)
         scores[:, ~usable] = -np.inf

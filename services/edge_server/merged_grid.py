@@ -13,6 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from services.common.grid import GridSpec
+from services.common.voxels import centres, unpack
+from services.edge_server.arrays import unique_rows_2
 from services.edge_server.config import EdgeConfig
 from services.edge_server.merged_map import MergedMap
 from services.edge_server.submap_store import StoredSubmap, SubmapKey, SubmapStore
@@ -64,7 +66,7 @@ def grow_bounds(
 def world_cells(xy: np.ndarray, resolution_m: float) -> np.ndarray:
     """(K, 2) unique absolute (row, col) cells of a grid with its origin at (0, 0)."""
     rc = np.floor(xy[:, ::-1] / resolution_m).astype(np.int64)
-    return np.unique(rc, axis=0) if len(rc) else rc
+    return unique_rows_2(rc)
 
 
 def _mark(mask: np.ndarray, spec: GridSpec, abs_rc: np.ndarray) -> None:
@@ -83,23 +85,35 @@ class MergedGrid:
         self.bounds = config.grid_bounds_m
         self._free_rc: dict[SubmapKey, tuple[int, int, np.ndarray]] = {}
         self._obstacle_rc: tuple[int, np.ndarray] = (-1, np.zeros((0, 2), np.int64))
+        self._stable: tuple[tuple, np.ndarray] = ((), np.zeros((0, 2), np.int64))
 
     def _all_free_rc(self, store: SubmapStore) -> np.ndarray:
-        """Absolute world cells of every submap's free cells, cached per submap version."""
+        """Absolute world cells of every submap's free cells (duplicates possible), cached per
+        submap version; the union of all but each robot's newest submap is cached as one
+        deduplicated set (those rarely change, and overlapping submaps repeat most cells)."""
         res = self.config.grid_resolution_m
-        parts = []
+        cells: dict[SubmapKey, np.ndarray] = {}
+        stamps: dict[SubmapKey, tuple[int, int]] = {}
         for sm in store.ordered():
             cached = self._free_rc.get(sm.key)
             if cached is None or cached[:2] != (sm.version, sm.pose_version):
                 cached = (sm.version, sm.pose_version, world_cells(free_cells_world(sm), res))
                 self._free_rc[sm.key] = cached
-            parts.append(cached[2])
-        return np.concatenate(parts) if parts else np.zeros((0, 2), np.int64)
+            cells[sm.key] = cached[2]
+            stamps[sm.key] = cached[:2]
+        newest = {robot: max(k for k in cells if k[0] == robot) for robot in {k[0] for k in cells}}
+        stable = sorted(k for k in cells if k not in newest.values())
+        signature = tuple((k, stamps[k]) for k in stable)
+        if signature != self._stable[0]:
+            union = (unique_rows_2(np.concatenate([cells[k] for k in stable])) if stable
+                     else np.zeros((0, 2), np.int64))
+            self._stable = (signature, union)
+        return np.concatenate([self._stable[1]] + [cells[k] for k in sorted(newest.values())])
 
-    def _obstacle_xy(self, merged: MergedMap) -> np.ndarray:
-        z = merged.points_world[:, 2]
+    def _band_xy(self, points_world: np.ndarray) -> np.ndarray:
+        z = points_world[:, 2]
         band = (z >= self.config.obstacle_z_min_m) & (z <= self.config.obstacle_z_max_m)
-        return merged.points_world[band, :2]
+        return points_world[band, :2]
 
     def spec(self) -> GridSpec | None:
         if self.bounds is None:
@@ -117,7 +131,14 @@ class MergedGrid:
         res = self.config.grid_resolution_m
         free_rc = self._all_free_rc(store)
         if self._obstacle_rc[0] != merged.version:
-            self._obstacle_rc = (merged.version, world_cells(self._obstacle_xy(merged), res))
+            added = getattr(merged, "added_keys", None)
+            if self._obstacle_rc[0] == merged.version - 1 and added is not None:
+                # one delta since the last grid: only the new voxels' band cells (P* is large)
+                new_rc = world_cells(self._band_xy(centres(unpack(added), merged.voxel_m)), res)
+                rc = unique_rows_2(np.concatenate([self._obstacle_rc[1], new_rc]))
+            else:
+                rc = world_cells(self._band_xy(merged.points_world), res)
+            self._obstacle_rc = (merged.version, rc)
         obstacle_rc = self._obstacle_rc[1]
         if self.config.grid_bounds_m is None:
             free_xy = (free_rc[:, ::-1] + 0.5) * res

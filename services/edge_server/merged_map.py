@@ -58,6 +58,8 @@ class MergedMap:
         self._points: np.ndarray | None = None
         self._store_version = -1
         self.version = 0  # bumps whenever the merged set changes
+        # keys the last update inserted; None after a rebuild (voxels may have been removed)
+        self.added_keys: np.ndarray | None = np.zeros(0, np.int64)
 
     # -- update ----------------------------------------------------------------------------
     def update(self, store: SubmapStore) -> bool:
@@ -85,6 +87,7 @@ class MergedMap:
                 part.n = sm.keys.size
         if rebuild:
             self._rebuild(store)
+            self.added_keys = None
         elif deltas:
             self._merge_delta(*(np.concatenate(parts) for parts in zip(*deltas, strict=True)))
         else:
@@ -116,6 +119,7 @@ class MergedMap:
         inside = pos < self.keys.size
         known[inside] = self.keys[pos[inside]] == keys[inside]
         new, pos = ~known, pos[~known]
+        self.added_keys = keys[new]
         self.keys = np.insert(self.keys, pos, keys[new])
         self.colors = np.insert(self.colors, pos, colors[new], axis=0)
         self.robot_ids = np.insert(self.robot_ids, pos, robots[new])

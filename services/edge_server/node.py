@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import signal
+import statistics
 import threading
 import time
 
@@ -91,6 +92,9 @@ class EdgeNode:
         self.lock = threading.Lock()
         self.last_tick = 0
         self.plans = 0
+        self.plan_ms: list[float] = []  # wall time, for the log only
+        self.tick_ms: list[float] = []
+        self.all_plan_ms: list[float] = []
 
     def serve_cloud(self, body: bytes) -> Cloud:
         with self.lock:
@@ -133,14 +137,22 @@ class EdgeNode:
         with self.lock:
             out = self.planner.plan(tick)
             self.last_tick = tick
+        t_plan = time.perf_counter() - t0
         self.publish(out)
         self.bus.publish(self.bus.keys.edge_ack(), EdgeAck(tick=tick))  # last
         self.plans += 1
+        self.plan_ms.append(1000 * t_plan)
+        self.all_plan_ms.append(1000 * t_plan)
+        self.tick_ms.append(1000 * (time.perf_counter() - t0))
         if self.plans % REPORT_EVERY_PLANS == 0:
-            log.info("tick %d: %d voxels, %d frontiers, assigned %s, complete %s, plan %.1f ms",
+            log.info("tick %d: %d voxels, %d frontiers, assigned %s, complete %s, plan median %.1f"
+                     " ms (max %.1f), plan + publish median %.1f ms over the last %d plans",
                      tick, len(self.planner.merged), len(out.frontiers.frontiers),
                      out.frontiers.assigned, out.frontiers.complete,
-                     1000 * (time.perf_counter() - t0))
+                     statistics.median(self.plan_ms), max(self.plan_ms),
+                     statistics.median(self.tick_ms), len(self.plan_ms))
+            self.plan_ms.clear()
+            self.tick_ms.clear()
 
     def publish(self, out: PlanOutput) -> None:
         k = self.bus.keys
@@ -172,6 +184,7 @@ def main(config: SpacemapConfig) -> None:
                 node.handle(item)
             if node.planner.judge.complete and not complete_logged:
                 complete_logged = True
-                log.info("exploration complete at tick %s", node.planner.judge.complete_tick)
+                log.info("exploration complete at tick %s (all plans: median %.1f ms)",
+                         node.planner.judge.complete_tick, statistics.median(node.all_plan_ms))
     log.info("edge stopped (submap seq gaps: %s)", dict(node.planner.store.seq_gaps))
 

@@ -25,24 +25,28 @@ from schemas.messages import (
     RobotPose,
     Submap,
 )
-from services.common.planning import distance_fields, inflate
 from services.edge_server.assignment import make_scorer
-from services.edge_server.completion import CompletionJudge
+from services.edge_server.completion import CompletionJudge, VisitLog
 from services.edge_server.config import EdgeConfig
+from services.edge_server.frontier_cache import IncrementalFrontiers
 from services.edge_server.frontiers import (
     FrontierSet,
+    GoalTransform,
     detect_frontiers,
     empty_frontiers,
     frontier_set,
+    goal_transform,
 )
+from services.edge_server.frontiers3d import PointFrontiers
 from services.edge_server.goals import GoalBook
 from services.edge_server.importance import importance
 from services.edge_server.merged_grid import GridSnapshot, MergedGrid
 from services.edge_server.merged_map import MergedMap
 from services.edge_server.merger import MapMerger, MergerParams
+from services.edge_server.robot_fields import InflationCache, RobotFields
 from services.edge_server.robot_views import robot_grid
 from services.edge_server.rrt import rrt_frontier_mask
-from services.edge_server.spatial_frontiers import detect_spatial_frontiers
+from services.edge_server.spatial_frontiers import detect_spatial_frontiers, subset
 from services.edge_server.submap_store import SubmapStore
 
 
@@ -59,19 +63,10 @@ class PlanOutput:
 def robot_fields(
     traversable: np.ndarray, starts_rc: dict[int, np.ndarray], snap_cells: float
 ) -> dict[int, np.ndarray]:
-    """Path-length field (cells) per robot; a start off the traversable grid snaps to the
-    nearest traversable cell within `snap_cells` (the floor under a robot is never seen)."""
-    H, W = traversable.shape
-    offset, nearest = ndimage.distance_transform_edt(~traversable, return_indices=True)
-    fields = {robot: np.full((H, W), np.inf) for robot in starts_rc}
-    snapped: dict[int, tuple[int, int]] = {}
-    for robot, (r, c) in starts_rc.items():
-        if 0 <= r < H and 0 <= c < W and traversable.any() and offset[r, c] <= snap_cells:
-            snapped[robot] = (int(nearest[0][r, c]), int(nearest[1][r, c]))
-    if snapped:
-        stack = distance_fields(traversable, list(snapped.values()))
-        fields.update(zip(snapped, stack, strict=True))
-    return fields
+    """Every robot's path-length field (cells), computed now (tests, benchmarks)."""
+    fields = RobotFields(traversable, starts_rc, snap_cells)
+    fields.compute(fields.robots)
+    return {robot: fields[robot] for robot in fields.robots}
 
 
 def frontiers_message(tick: int, fs: FrontierSet, complete: bool, assigned: dict[int, int],
@@ -110,6 +105,13 @@ class EdgePlanner:
         self.poses: dict[int, Pose2D] = {}
         self.dead: set[int] = set()
         self.last_grid: GridSnapshot | None = None
+        # Alg. 1 kept up to date between plans (only voxels near new ones are recomputed)
+        self.alg1 = IncrementalFrontiers(config.frontier_voxel_m, config.search_radius_m,
+                                         config.density_threshold, config.variance_threshold_m2,
+                                         config.frontier_z_max_m)
+        self._alg1_version = -1
+        self.inflation = InflationCache()
+        self.visits = VisitLog(config.weak_visit_range_m, math.radians(config.weak_visit_fov_deg))
 
     # -- inputs ----------------------------------------------------------------------------
     def on_submap(self, msg: Submap) -> None:
@@ -152,34 +154,48 @@ class EdgePlanner:
                                   T_world_submap=poses))
         return out
 
+    def _point_frontiers(self) -> PointFrontiers | None:
+        """Alg. 1 on P*, incrementally when P* is on the ϱ lattice (None: from scratch)."""
+        if not np.isclose(self.merged.voxel_m, self.config.frontier_voxel_m):
+            return None
+        step = self.merged.version == self._alg1_version + 1
+        added = self.merged.added_keys if step else None  # else: set difference
+        if self.merged.version != self._alg1_version or self._alg1_version < 0:
+            self._pf = self.alg1.update(self.merged.keys, added)
+            self._alg1_version = self.merged.version
+        return self._pf
+
     def _frontiers(
         self, tick: int, snap: GridSnapshot, traversable: np.ndarray, reachable: np.ndarray,
-        fields: dict[int, np.ndarray], robot_xy: np.ndarray,
+        fields: RobotFields, robot_xy: np.ndarray, goal_edt: GoalTransform,
     ) -> FrontierSet:
         """Frontier regions of the configured planner, with goals among `reachable` cells."""
         cfg, spec = self.config, snap.spec
         if cfg.planner == "space":
-            fs, _ = detect_spatial_frontiers(self.merged, snap.known, reachable,
-                                             spec, cfg)
+            fs, _ = detect_spatial_frontiers(self.merged, snap.known, reachable, spec, cfg,
+                                             self._point_frontiers(), goal_edt)
+            # F_w regions already seen from close by are not worth a trip (completion.py)
+            fs = subset(fs, ~(fs.weak & self.visits.seen(fs.centroid_xy)))
             imp = importance(tick * self.tick_s, robot_xy, fs.centroid_xy, fs.weak,
                              cfg.importance_lambda, cfg.importance_xi_s)
             return replace(fs, importance=imp)
         if cfg.planner == "rrt":
-            starts = [tuple(int(v) for v in np.argwhere(f == 0)[0])
-                      for _, f in sorted(fields.items()) if (f == 0).any()]
+            starts = [fields.starts[r] for r in sorted(fields.starts)]
             rng = np.random.default_rng([cfg.seed, tick])
             mask = rrt_frontier_mask(traversable, snap.known, starts, cfg.rrt_iterations,
                                      cfg.rrt_step_m / spec.resolution_m, rng)
             link = int(round(cfg.frontier_link_m / spec.resolution_m))
             mask = ndimage.binary_dilation(mask, np.ones((2 * link + 1,) * 2, bool)) & ~snap.known
-            return frontier_set(mask, reachable, spec, 1, cfg.goal_max_offset_m)
-        return detect_frontiers(snap.free, snap.known, reachable, spec, cfg)
+            return frontier_set(mask, reachable, spec, 1, cfg.goal_max_offset_m, goal_edt)
+        return detect_frontiers(snap.free, snap.known, reachable, spec, cfg, goal_edt)
 
     def plan(self, tick: int) -> PlanOutput:
         corrections = self._merge(tick)
         self.merged.update(self.store)
         robots = self.active_robots()
         robot_xy = np.array([[self.poses[r].x, self.poses[r].y] for r in robots]).reshape(-1, 2)
+        for r in robots:
+            self.visits.record(r, self.poses[r].x, self.poses[r].y, self.poses[r].yaw)
         # Robots widen the grid only once there is data (no grid at all before that).
         extra_xy = robot_xy if self.store.submaps else None
         snap = self.grid.update(self.store, self.merged, extra_xy)
@@ -191,13 +207,12 @@ class EdgePlanner:
                               corrections)
         spec = snap.spec
         radius_cells = math.ceil(self.config.robot_radius_m / spec.resolution_m - 1e-9)
-        traversable = snap.free & ~inflate(snap.occupied, radius_cells)
+        traversable = snap.free & ~self.inflation(snap.occupied, radius_cells)
         starts = dict(zip(robots, spec.cell_of(robot_xy), strict=True))
-        fields = robot_fields(traversable, starts, self.config.start_snap_m / spec.resolution_m)
-        reachable = np.zeros(spec.shape, bool)
-        for f in fields.values():
-            reachable |= np.isfinite(f)
-        fs = self._frontiers(tick, snap, traversable, reachable, fields, robot_xy)
+        fields = RobotFields(traversable, starts, self.config.start_snap_m / spec.resolution_m)
+        reachable = fields.reachable
+        fs = self._frontiers(tick, snap, traversable, reachable, fields, robot_xy,
+                             goal_transform(reachable))
         result = self.book.plan(tick, robots, fields, fs, spec, self.scorer)
         complete = self.judge.update(tick, result.assignable, int(snap.known.sum()))
         grid_msg = OccupancyGrid(tick=tick, resolution_m=spec.resolution_m, origin_x=spec.origin_x,

@@ -17,7 +17,12 @@ from scipy import ndimage
 from services.common.grid import GridSpec
 from services.common.voxels import unpack
 from services.edge_server.config import EdgeConfig
-from services.edge_server.frontiers import FrontierSet, empty_frontiers, frontier_set
+from services.edge_server.frontiers import (
+    FrontierSet,
+    GoalTransform,
+    empty_frontiers,
+    frontier_set,
+)
 from services.edge_server.frontiers3d import (
     PointFrontiers,
     detect_point_frontiers,
@@ -51,6 +56,7 @@ def concat(a: FrontierSet, b: FrontierSet) -> FrontierSet:
 
 def class_regions(
     pf: PointFrontiers, weak: bool, goal_ok: np.ndarray, spec: GridSpec, config: EdgeConfig,
+    goal_edt: GoalTransform | None = None,
 ) -> FrontierSet:
     """Regions of one class with |V_f|, I_g, 3D centroid and goals f′."""
     mask = (pf.weak if weak else pf.unexplored) & (pf.points_world[:, 2] <= config.frontier_z_max_m)
@@ -62,8 +68,9 @@ def class_regions(
     cells[rc[:, 0], rc[:, 1]] = True
     r = int(round(config.frontier_link_m / spec.resolution_m))
     if r > 0 and sel.size:
-        cells = ndimage.binary_dilation(cells, structure=np.ones((2 * r + 1,) * 2, bool))
-    fs = frontier_set(cells, goal_ok, spec, 1, config.goal_max_offset_3d_m)
+        # square dilation = separable max filter (binary_dilation iterates the whole square)
+        cells = ndimage.maximum_filter(cells.view(np.uint8), size=2 * r + 1).view(bool)
+    fs = frontier_set(cells, goal_ok, spec, 1, config.goal_max_offset_3d_m, goal_edt)
     n = len(fs)
     lab = fs.labels[rc[:, 0], rc[:, 1]] - 1
     ok = lab >= 0
@@ -93,21 +100,22 @@ def near_unknown(fs: FrontierSet, known: np.ndarray, spec: GridSpec, max_m: floa
 
 def detect_spatial_frontiers(
     merged: MergedMap, known: np.ndarray, goal_ok: np.ndarray, spec: GridSpec,
-    config: EdgeConfig,
+    config: EdgeConfig, pf: PointFrontiers | None = None, goal_edt: GoalTransform | None = None,
 ) -> tuple[FrontierSet, PointFrontiers]:
-    """F_u regions then F_w regions of P*, with gains and goals (importance still 1)."""
+    """F_u regions then F_w regions of P*, with gains and goals (importance still 1).
+    `pf`: Alg. 1's output when the caller keeps it incrementally (frontier_cache.py)."""
     args = (config.frontier_voxel_m, config.search_radius_m, config.density_threshold,
             config.variance_threshold_m2)
-    if np.isclose(merged.voxel_m, config.frontier_voxel_m):  # P* is already on the ϱ lattice
+    if pf is None and np.isclose(merged.voxel_m, config.frontier_voxel_m):  # on the ϱ lattice
         pf = lattice_frontiers(unpack(merged.keys), *args)
-    else:
+    elif pf is None:
         pf = detect_point_frontiers(merged.points_world, *args)
     if not len(pf.rho) or not goal_ok.any():
         return _typed_empty(spec), pf
-    unexplored = class_regions(pf, False, goal_ok, spec, config)
+    unexplored = class_regions(pf, False, goal_ok, spec, config, goal_edt)
     unexplored = subset(unexplored, near_unknown(unexplored, known, spec,
                                                  config.unexplored_unknown_m))
-    weak = class_regions(pf, True, goal_ok, spec, config)
+    weak = class_regions(pf, True, goal_ok, spec, config, goal_edt)
     return concat(unexplored, weak), pf
 
 

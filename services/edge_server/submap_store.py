@@ -23,6 +23,7 @@ import numpy as np
 
 from schemas.messages import Submap
 from services.common.voxels import pack, voxel_indices
+from services.edge_server.arrays import unique_first, unique_rows_2
 
 log = logging.getLogger(__name__)
 
@@ -57,7 +58,7 @@ def _upsert(
     sm: StoredSubmap, keys: np.ndarray, colors: np.ndarray, counts: np.ndarray, tick: int
 ) -> None:
     """Insert new voxels, refresh colour and count of known ones; new voxels go to the end."""
-    keys, first = np.unique(keys, return_index=True)
+    keys, first = unique_first(keys)
     colors, counts = colors[first], counts[first]
     known = np.zeros(keys.size, bool)
     if sm.keys.size:
@@ -103,7 +104,7 @@ class SubmapStore:
             _upsert(sm, keys, msg.colors, msg.counts, msg.tick)
         if msg.free_cells.shape[1]:
             cells = np.concatenate([sm.free_cells, msg.free_cells.T.astype(np.int64)])
-            sm.free_cells = np.unique(cells, axis=0)
+            sm.free_cells = unique_rows_2(cells)
         sm.cell_m = msg.cell_m
         sm.version += 1
         self.version += 1

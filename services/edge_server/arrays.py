@@ -1,0 +1,38 @@
+"""Sort-based unique helpers: numpy 2.4's np.unique (hash-based, then sorted) measured 50-100×
+slower than one sort plus a mask on the int64 keys the edge uses (0.1 s vs 1.5 ms for 200k)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+_COL_BIAS = 1 << 31  # columns shifted into [0, 2^32) so (row, col) packs into one int64
+
+
+def unique_sorted(keys: np.ndarray) -> np.ndarray:
+    """Sorted unique values of a 1-D array (= np.unique(keys))."""
+    s = np.sort(np.asarray(keys).ravel())
+    if s.size < 2:
+        return s
+    keep = np.empty(s.size, bool)
+    keep[0] = True
+    np.not_equal(s[1:], s[:-1], out=keep[1:])
+    return s[keep]
+
+
+def unique_first(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted unique values and the index of each one's first occurrence
+    (= np.unique(keys, return_index=True))."""
+    keys = np.asarray(keys).ravel()
+    order = np.argsort(keys, kind="stable")
+    s = keys[order]
+    keep = np.ones(s.size, bool)
+    keep[1:] = s[1:] != s[:-1]
+    return s[keep], order[keep]
+
+
+def unique_rows_2(rc: np.ndarray) -> np.ndarray:
+    """Unique rows of an (N, 2) int64 array with |values| < 2^31, sorted lexicographically
+    (= np.unique(rc, axis=0))."""
+    rc = np.asarray(rc, np.int64).reshape(-1, 2)
+    keys = unique_sorted((rc[:, 0] << 32) + (rc[:, 1] + _COL_BIAS))
+    return np.stack([keys >> 32, (keys & 0xFFFFFFFF) - _COL_BIAS], axis=1)

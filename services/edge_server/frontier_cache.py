@@ -1,0 +1,153 @@
+"""Incremental Alg. 1: ρ, Σo and Σ|o|² kept on a dense lattice box, updated by changed voxels.
+
+The three neighbourhood sums of a lattice cell p are linear in the occupancy of the cells within
+r_s of p, so adding (removing) a voxel q adds (subtracts) [1, q − p, |q − p|²] at every cell
+p = q − o of its ball stencil. Each plan therefore only touches the K stencil cells of the
+voxels P* gained or lost since the last plan (a few thousand per edge tick) instead of
+recomputing all N·K sums; reading ρ and σ² for P* is then one gather per sum. The sums are
+small integers, so the result equals `lattice_frontiers` exactly and does not depend on the
+order of updates (tests/test_edge_frontier_cache.py).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from services.common.voxels import unpack
+from services.edge_server.frontiers3d import PointFrontiers, ball_offsets, full_ball_variance
+
+CHUNK_VOX = 32  # the box grows in steps of this many voxels per axis (few reallocations)
+# One int64 per cell holds all five sums as signed bit fields (ρ, Σo_x, Σo_y, Σo_z, Σ|o|²):
+# addition is linear, so adding packed contributions adds every field at once; fields are
+# wide enough for any stencil with r_s ≤ 3 voxels (K ≤ 123: |Σo| ≤ 369, Σ|o|² ≤ 1107).
+FIELD_BITS = (9, 10, 10, 10, 12)
+
+
+def pack_fields(rows: np.ndarray) -> np.ndarray:
+    """(..., 5) signed ints → (...) int64 packed sums."""
+    out = np.zeros(rows.shape[:-1], np.int64)
+    shift = 0
+    for i, bits in enumerate(FIELD_BITS):
+        out += rows[..., i].astype(np.int64) << shift
+        shift += bits
+    return out
+
+
+def unpack_fields(packed: np.ndarray) -> np.ndarray:
+    """(N,) int64 packed sums → (5, N) int64 fields (lowest field first, borrows undone)."""
+    v = packed.copy()
+    out = np.empty((len(FIELD_BITS), packed.size), np.int64)
+    for i, bits in enumerate(FIELD_BITS):
+        half = 1 << (bits - 1)
+        out[i] = ((v + half) & ((1 << bits) - 1)) - half
+        v = (v - out[i]) >> bits
+    return out
+
+
+class LatticeStats:
+    """Dense per-cell neighbourhood sums (ρ, Σo, Σ|o|², packed) over a growing box."""
+
+    def __init__(self, radius_vox: float) -> None:
+        self.offsets = ball_offsets(radius_vox)
+        if len(self.offsets) > 123:
+            raise ValueError("r_s > 3 voxels overflows the packed sums (FIELD_BITS)")
+        self.pad = int(np.abs(self.offsets).max())
+        self.lo = np.zeros(3, np.int64)
+        self.dims = np.zeros(3, np.int64)
+        self.sums = np.zeros(0, np.int64)
+        # per offset o, the contribution of a voxel at p + o to cell p: [1, o, |o|²]
+        self._packed = pack_fields(np.concatenate(
+            [np.ones((len(self.offsets), 1), np.int64), self.offsets,
+             (self.offsets**2).sum(1, keepdims=True)], 1))
+
+    def _strides(self) -> np.ndarray:
+        return np.array([self.dims[1] * self.dims[2], self.dims[2], 1], np.int64)
+
+    def _fit(self, idx: np.ndarray) -> None:
+        """Grow the box (snapped to CHUNK_VOX) so every stencil cell of `idx` lies inside."""
+        lo = idx.min(0) - self.pad
+        hi = idx.max(0) + self.pad + 1
+        if self.sums.size and (lo >= self.lo).all() and (hi <= self.lo + self.dims).all():
+            return
+        if self.sums.size:
+            lo, hi = np.minimum(lo, self.lo), np.maximum(hi, self.lo + self.dims)
+        new_lo = np.floor_divide(lo, CHUNK_VOX) * CHUNK_VOX
+        new_dims = -np.floor_divide(-(hi - new_lo), CHUNK_VOX) * CHUNK_VOX
+        grown = np.zeros(new_dims, np.int64)
+        if self.sums.size:
+            a = self.lo - new_lo
+            b = a + self.dims
+            grown[a[0]:b[0], a[1]:b[1], a[2]:b[2]] = self.sums.reshape(*self.dims)
+        self.lo, self.dims = new_lo, new_dims
+        self.sums = grown.ravel()
+
+    def apply(self, idx: np.ndarray, sign: int) -> None:
+        """Add (sign +1) or remove (−1) unique voxels `idx` (M, 3) from the occupancy."""
+        if idx.shape[0] == 0:
+            return
+        self._fit(idx)
+        strides = self._strides()
+        flat = (idx - self.lo) @ strides
+        off_flat = self.offsets @ strides
+        for k in range(len(self.offsets)):
+            # cell p = q − o sees q at offset +o; cells of one offset are distinct (no add.at)
+            self.sums[flat - off_flat[k]] += sign * self._packed[k]
+
+    def read(self, idx: np.ndarray) -> np.ndarray:
+        """(5, N) int64 sums at voxels `idx` (must lie inside the box)."""
+        return unpack_fields(self.sums[(idx - self.lo) @ self._strides()])
+
+
+def _diff(old: np.ndarray, new: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Keys in `new` but not `old`, and in `old` but not `new` (both sorted unique)."""
+    return _missing_from(new, old), _missing_from(old, new)
+
+
+def _missing_from(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Values of sorted `a` not in sorted `b` (searchsorted: np.setdiff1d is far slower)."""
+    if not b.size:
+        return a
+    pos = np.minimum(np.searchsorted(b, a), b.size - 1)
+    return a[b[pos] != a]
+
+
+class IncrementalFrontiers:
+    """Alg. 1 on P* kept up to date between plans; `update` returns the same `PointFrontiers`
+    as `lattice_frontiers` restricted to voxels whose centre is at most `z_max_m` high."""
+
+    def __init__(self, voxel_m: float, radius_m: float, delta_d: float, delta_v_m2: float,
+                 z_max_m: float = np.inf) -> None:
+        self.voxel_m = voxel_m
+        self.delta_d = delta_d
+        self.delta_v_m2 = delta_v_m2
+        self.z_max_m = z_max_m
+        self.stats = LatticeStats(radius_m / voxel_m)
+        self.full_count = len(self.stats.offsets)
+        self.full_var_m2 = full_ball_variance(self.stats.offsets) * voxel_m**2
+        self.keys = np.zeros(0, np.int64)
+
+    def update(self, keys: np.ndarray, added: np.ndarray | None = None) -> PointFrontiers:
+        """Bring the sums to the sorted unique packed `keys`; `added` (optional) = the keys new
+        since the previous call when nothing was removed (saves the set difference)."""
+        if added is None:
+            added, removed = _diff(self.keys, keys)
+        else:
+            removed = np.zeros(0, np.int64)
+        self.stats.apply(unpack(removed), -1)
+        self.stats.apply(unpack(added), +1)
+        self.keys = keys
+        idx = unpack(keys)
+        idx = idx[(idx[:, 2] + 0.5) * self.voxel_m <= self.z_max_m]
+        if idx.shape[0] == 0:
+            return self._points(idx, np.zeros((5, 0), np.int64))
+        return self._points(idx, self.stats.read(idx))
+
+    def _points(self, idx: np.ndarray, sums: np.ndarray) -> PointFrontiers:
+        rho = sums[0]  # ≥ 1: a voxel counts itself
+        mean = sums[1:4] / rho  # the kernel's exact float steps: same masks at δ_v ties
+        var_vox = sums[4] / rho - (mean**2).sum(axis=0)
+        var_m2 = np.maximum(var_vox, 0.0) * self.voxel_m**2
+        return PointFrontiers(
+            indices=idx, points_world=(idx + 0.5) * self.voxel_m, rho=rho, var_m2=var_m2,
+            unexplored=rho < self.delta_d, weak=var_m2 > self.delta_v_m2,
+            full_count=self.full_count, full_var_m2=self.full_var_m2)

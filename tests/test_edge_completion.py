@@ -1,0 +1,90 @@
+"""Completion rules: visited F_w regions, repeated strikes, and the cropped distance fields."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from schemas.messages import GoalStatus
+from services.common.grid import GridSpec
+from services.common.planning import distance_fields
+from services.edge_server.completion import VisitLog
+from services.edge_server.config import EdgeConfig
+from services.edge_server.frontiers import frontier_set
+from services.edge_server.goals import GoalBook
+from services.edge_server.planner import robot_fields
+
+
+def test_visit_log_needs_range_and_field_of_view() -> None:
+    log = VisitLog(range_m=2.0, fov_rad=math.radians(84.1))
+    pts = np.array([[1.5, 0.0], [0.0, 1.5], [3.0, 0.0], [-1.0, 0.0]])
+    assert not log.seen(pts).any()
+    log.record(0, 0.0, 0.0, 0.0)  # facing +x
+    assert log.seen(pts).tolist() == [True, False, False, False]
+    log.record(0, 0.05, 0.0, 0.05)  # near-duplicate viewpoint: not stored
+    assert len(log.views) == 1
+    log.record(0, 0.0, 0.0, math.pi / 2)  # turned to +y
+    assert log.seen(pts).tolist() == [True, True, False, False]
+
+
+def _one_frontier_at(xy: tuple[float, float]):
+    spec = GridSpec(0.0, 0.0, 0.05, 40, 40)
+    mask = np.zeros(spec.shape, bool)
+    r, c = spec.cell_of(np.array([xy]))[0]
+    mask[r - 1 : r + 2, c - 1 : c + 2] = True
+    return frontier_set(mask, np.ones(spec.shape, bool), spec, 1, 1.0)
+
+
+def test_third_strike_at_one_place_sets_it_aside_for_good() -> None:
+    book = GoalBook(EdgeConfig(blacklist_strikes=3, blacklist_ticks=50,
+                               reached_blacklist_ticks=50))
+    fs = _one_frontier_at((1.0, 1.0))
+    for goal_id, (tick, status) in enumerate([(0, "invalid"), (100, "reached")]):
+        book.issued[goal_id] = (1.0, 1.0, False)
+        book.on_status(GoalStatus(robot_id=0, tick=tick, goal_id=goal_id, status=status))
+        assert not book.allowed(fs, tick + 10)[0]
+        assert book.allowed(fs, tick + 60)[0]  # two strikes: still expires
+    book.issued[2] = (1.1, 1.0, False)  # the same place, within blacklist_radius_m
+    book.on_status(GoalStatus(robot_id=0, tick=200, goal_id=2, status="unreachable"))
+    assert not book.allowed(fs, 10**8)[0]
+    assert book.allowed(_one_frontier_at((1.8, 1.8)), 300)[0]  # elsewhere unaffected
+
+
+def test_cropped_robot_fields_equal_full_dijkstra() -> None:
+    rng = np.random.default_rng(3)
+    trav = rng.random((60, 80)) > 0.25
+    trav[:, 40] = False  # two components
+    starts = {0: np.array([5, 5]), 1: np.array([50, 70]), 2: np.array([30, 10])}
+    got = robot_fields(trav, starts, snap_cells=3.0)
+    for robot, (r, c) in starts.items():
+        off = np.argwhere(trav)
+        rr, cc = off[np.argmin(((off - [r, c]) ** 2).sum(1))]  # snapped start
+        ref = distance_fields(trav, [(int(rr), int(cc))])[0]
+        np.testing.assert_array_equal(got[robot], ref)
+
+
+def test_inflation_cache_equals_full_inflation() -> None:
+    from services.common.planning import inflate
+    from services.edge_server.robot_fields import InflationCache
+
+    rng = np.random.default_rng(5)
+    cache = InflationCache()
+    occ = rng.random((50, 70)) > 0.97
+    for _ in range(4):
+        np.testing.assert_array_equal(cache(occ, 4), inflate(occ, 4))
+        occ = occ | (rng.random(occ.shape) > 0.995)  # grows: incremental path
+    occ[:10] = False  # shrinks: full recompute
+    np.testing.assert_array_equal(cache(occ, 4), inflate(occ, 4))
+
+
+def test_lazy_fields_reach_where_finite() -> None:
+    from services.edge_server.robot_fields import RobotFields
+
+    rng = np.random.default_rng(4)
+    trav = rng.random((40, 40)) > 0.3
+    fields = RobotFields(trav, {0: np.array([3, 3]), 1: np.array([100, 100])}, 3.0)
+    cells = np.argwhere(np.ones_like(trav))
+    np.testing.assert_array_equal(fields.reaches(0, cells),
+                                  np.isfinite(fields[0][cells[:, 0], cells[:, 1]]))
+    assert not fields.reaches(1, cells).any() and np.isinf(fields[1]).all()

@@ -1,0 +1,68 @@
+"""Incremental Alg. 1 (frontier_cache.py) equals the from-scratch lattice kernel."""
+
+import numpy as np
+
+from services.common.voxels import pack
+from services.edge_server.frontier_cache import IncrementalFrontiers
+from services.edge_server.frontiers3d import lattice_frontiers
+
+V, R, DD, DV = 0.05, 0.15, 27.0, 0.0128
+
+
+def _cloud(rng: np.random.Generator, n: int, lo: int = 0) -> np.ndarray:
+    idx = rng.integers(lo, lo + 20, size=(n, 3))
+    return np.unique(pack(idx), axis=0)
+
+
+def _check(inc: IncrementalFrontiers, keys: np.ndarray, z_max: float = np.inf, **kw) -> None:
+    got = inc.update(keys, **kw)
+    from services.common.voxels import unpack
+    idx = unpack(keys)
+    ref = lattice_frontiers(idx, V, R, DD, DV)
+    keep = (idx[:, 2] + 0.5) * V <= z_max
+    assert np.array_equal(got.indices, idx[keep])
+    assert np.array_equal(got.rho, ref.rho[keep])
+    np.testing.assert_allclose(got.var_m2, ref.var_m2[keep], atol=1e-12)
+    assert np.array_equal(got.weak, ref.weak[keep])
+    assert np.array_equal(got.unexplored, ref.unexplored[keep])
+    assert got.full_count == ref.full_count
+
+
+def test_incremental_matches_full_through_growth_and_removal():
+    rng = np.random.default_rng(0)
+    inc = IncrementalFrontiers(V, R, DD, DV)
+    keys = _cloud(rng, 1500)
+    _check(inc, keys)
+    more = np.union1d(keys, _cloud(rng, 800, lo=15))  # grows the box
+    _check(inc, more, added=np.setdiff1d(more, keys))
+    fewer = more[rng.random(more.size) < 0.7]  # removal (a rebuilt P*): set difference path
+    _check(inc, fewer)
+    far = np.union1d(fewer, _cloud(rng, 300, lo=-70))  # far outside the box, negative indices
+    _check(inc, far)
+
+
+def test_z_crop_returns_only_low_voxels():
+    rng = np.random.default_rng(1)
+    inc = IncrementalFrontiers(V, R, DD, DV, z_max_m=0.5)
+    _check(inc, _cloud(rng, 2000), z_max=0.5)
+
+
+def test_incremental_obstacle_cells_equal_a_fresh_grid() -> None:
+    from services.edge_server.config import EdgeConfig
+    from services.edge_server.merged_grid import MergedGrid
+    from services.edge_server.merged_map import MergedMap
+    from services.edge_server.submap_store import SubmapStore
+    from tests.test_edge_map import make_submap
+
+    rng = np.random.default_rng(2)
+    cfg = EdgeConfig(grid_bounds_m=(-1.0, -1.0, 3.0, 3.0))
+    store, merged, grid = SubmapStore(V), MergedMap(V), MergedGrid(cfg)
+    free = np.argwhere(np.ones((20, 20), bool))
+    for seq in range(3):
+        pts = rng.uniform([0, 0, 0], [2, 2, 0.8], (300, 3))
+        store.apply(make_submap(0, 0, seq, 0, np.eye(4), pts, free))
+        merged.update(store)
+        snap = grid.update(store, merged)  # incremental after the first
+        fresh = MergedGrid(cfg).update(store, merged)
+        assert np.array_equal(snap.cells, fresh.cells)
+        assert snap.occupied.any()
