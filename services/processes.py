@@ -70,11 +70,21 @@ class ProcessGroup:
         return {n: p.returncode for n, p in self.children.items() if p.poll() is not None}
 
     def stop(self, grace_s: float = 10.0, order: list[str] | None = None) -> dict[str, int]:
-        """SIGTERM every child (in `order` first), SIGKILL what is left after `grace_s`."""
-        names = (order or []) + [n for n in self.children if n not in (order or [])]
+        """SIGTERM every child (in `order` first), SIGKILL what is left after `grace_s`.
+
+        The router goes last, once every client has closed its session: a router stopped
+        while clients still hang up can take longer than the grace period to exit."""
+        first = [n for n in (order or []) if n in self.children]
+        names = first + [n for n in self.children if n not in first]
+        clients = [n for n in names if n != "router"]
+        self._terminate(clients, grace_s)
+        self._terminate([n for n in names if n == "router"], grace_s)
+        return {n: int(p.returncode) for n, p in self.children.items()}
+
+    def _terminate(self, names: list[str], grace_s: float) -> None:
         for name in names:
-            proc = self.children.get(name)
-            if proc is not None and proc.poll() is None:
+            proc = self.children[name]
+            if proc.poll() is None:
                 proc.send_signal(signal.SIGTERM)
         deadline = time.monotonic() + grace_s
         for name in names:
@@ -85,4 +95,3 @@ class ProcessGroup:
                 log.warning("%s ignored SIGTERM; killing it", name)
                 proc.kill()
                 proc.wait()
-        return {n: int(p.returncode) for n, p in self.children.items()}

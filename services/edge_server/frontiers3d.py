@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from services.common.arrays import unique_sorted
 from services.common.voxels import pack, unpack, voxel_indices
-from services.edge_server.arrays import unique_sorted
 
 CHUNK = 1024  # points per gather block: keeps the K×chunk block in cache
 

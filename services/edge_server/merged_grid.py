@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from services.common.arrays import unique_rows_2
 from services.common.grid import GridSpec
 from services.common.voxels import centres, unpack
-from services.edge_server.arrays import unique_rows_2
 from services.edge_server.config import EdgeConfig
 from services.edge_server.merged_map import MergedMap
 from services.edge_server.submap_store import StoredSubmap, SubmapKey, SubmapStore

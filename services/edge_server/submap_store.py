@@ -22,8 +22,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from schemas.messages import Submap
+from services.common.arrays import unique_first, unique_rows_2
 from services.common.voxels import pack, voxel_indices
-from services.edge_server.arrays import unique_first, unique_rows_2
 
 log = logging.getLogger(__name__)
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from services.common import voxels
+from services.common.arrays import unique_sorted
 from services.common.geometry import invert, wrap_angle, xyyaw_from_T
 from services.robot_agent.config import AgentConfig
 
@@ -70,7 +71,7 @@ class VoxelSubmap:
         col_sum = np.stack(
             [np.bincount(inverse, weights=colors[:, d], minlength=uniq.size) for d in range(3)], 1
         )
-        merged = np.union1d(self.keys, uniq)
+        merged = unique_sorted(np.concatenate([self.keys, uniq]))  # np.union1d is slow
         if merged.size != self.keys.size:
             self._grow(merged)
         idx = np.searchsorted(self.keys, uniq)
@@ -97,7 +98,7 @@ class VoxelSubmap:
         ij = ij[np.all((ij >= 0) & (ij < 2 * _FREE_HALF), axis=1)]
         ij = ij[~self.free_seen[ij[:, 0], ij[:, 1]]]
         if ij.shape[0]:
-            flat = np.unique(ij[:, 0] * (2 * _FREE_HALF) + ij[:, 1])
+            flat = unique_sorted(ij[:, 0] * (2 * _FREE_HALF) + ij[:, 1])
             new = np.stack(np.divmod(flat, 2 * _FREE_HALF))
             self.free_seen[new[0], new[1]] = True
             self.pending_free.append(new - _FREE_HALF)

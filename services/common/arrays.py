@@ -1,5 +1,5 @@
 """Sort-based unique helpers: numpy 2.4's np.unique (hash-based, then sorted) measured 50-100×
-slower than one sort plus a mask on the int64 keys the edge uses (0.1 s vs 1.5 ms for 200k)."""
+slower than one sort plus a mask on the int64 keys the services use (0.1 s vs 1.5 ms for 200k)."""
 
 from __future__ import annotations
 

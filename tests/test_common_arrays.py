@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from services.edge_server.arrays import unique_first, unique_rows_2, unique_sorted
+from services.common.arrays import unique_first, unique_rows_2, unique_sorted
 from services.edge_server.frontier_cache import _diff
 
 
