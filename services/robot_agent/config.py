@@ -93,7 +93,7 @@ class AgentConfig(BaseModel):
         default=0.7, ge=0, description="stop driving when a teammate centre is this close ahead"
     )
     yield_half_angle_rad: float = Field(default=math.pi / 3, ge=0)
-    validator_beta: int = Field(default=20, ge=1, description="β: path points in the window")
+    validator_beta: int = Field(default=5, ge=1, description="β: path points in the window")
     validator_slack_s: float = Field(
         default=4.0, ge=0, description="added to Σ t_e over the window (acceleration, slow-down)"
     )
