@@ -40,17 +40,20 @@ class AgentConfig(BaseModel):
     # -- localization ----------------------------------------------------------------------
     registration: bool = Field(default=True, description="refine odometry by frame-to-map GICP")
     register_every_frames: int = Field(default=1, ge=1)
+    # A fixed 8 cm / 0.05 rad gate and a map that never forgets beat the motion-scaled gate
+    # with a 100-frame map in 300 s house missions: BV 5.8 % vs 17.9 %, drift ≤ 0.19 m / 2.1°
+    # vs 0.36 m / 3.5° (docs/agent.md, "Registration gate").
     reg_step_m: float = Field(
-        default=0.02, gt=0, description="accepted correction: base + per metre (localization.py)"
+        default=0.08, gt=0, description="accepted correction: base + per metre (localization.py)"
     )
-    reg_step_per_m: float = Field(default=0.06, ge=0)
-    reg_step_rad: float = Field(default=0.02, gt=0)
+    reg_step_per_m: float = Field(default=0.0, ge=0)
+    reg_step_rad: float = Field(default=0.05, gt=0)
     reg_max_removed_frac: float = Field(
         default=0.2, ge=0, le=1, description="no registration when the DRF took more of a frame"
     )
     reg_min_inlier_frac: float = Field(default=0.5, ge=0, le=1)
     reg_map_horizon: int = Field(
-        default=100, ge=1, description="registered frames a map voxel survives unobserved"
+        default=100_000, ge=1, description="registered frames a map voxel survives unobserved"
     )
     voxel_m: float = Field(default=0.05, gt=0)
     max_v_mps: float = Field(default=0.5, gt=0)

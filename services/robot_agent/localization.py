@@ -38,8 +38,8 @@ class RegistrationParams:
     step_rad: float = 0.02  # tighter lost yaw corrections in missions (2.6-4.4° error)
     step_rad_per_rad: float = 0.03  # 3 × the 1 % turn-scale error
     step_rad_per_m: float = 0.015  # 3 × the 0.005 rad/m heading bias
-    cap_m: float = 0.05  # the gate never grows past these: after a long run of rejections
-    cap_rad: float = 0.02  # (spinning) a wide gate let wrong 3-6° GICP yaws in (missions)
+    cap_m: float = 0.08  # the gate never grows past these (AgentConfig sets a fixed gate:
+    cap_rad: float = 0.05  # 300 s missions drifted less with it than with a growing one)
     floor_z_m: float = 0.03  # floor points carry no planar information: dropped
     map_horizon: int = 100  # map voxels not re-observed in this many inserted frames are dropped
 
