@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import logging
 import os
-import signal
-import threading
 import time
 from pathlib import Path
 from typing import Annotated, Any
@@ -58,14 +56,6 @@ def service_config(
         raise typer.BadParameter(str(exc)) from exc
 
 
-def install_stop_handlers() -> threading.Event:
-    """A stop event set by SIGTERM or SIGINT (services poll it)."""
-    stop = threading.Event()
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda *_: stop.set())
-    return stop
-
-
 @app.command()
 def router(
     listen: Annotated[
@@ -78,9 +68,10 @@ def router(
 ) -> None:
     """Run the zenoh router (mode router)."""
     from services.common.router import run_router
+    from services.common.signals import stop_on_signals
 
     _setup_logging(log_level)
-    run_router(listen or ["tcp/0.0.0.0:7447"], install_stop_handlers(), lease)
+    run_router(listen or ["tcp/0.0.0.0:7447"], stop_on_signals(), lease)
 
 
 @app.command()

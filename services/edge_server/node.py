@@ -9,7 +9,6 @@ thread, so it and the main loop share one lock around the planner.
 from __future__ import annotations
 
 import logging
-import signal
 import statistics
 import threading
 import time
@@ -32,19 +31,13 @@ from schemas.messages import (
 from services.common.bus import Bus, Inbound, Presence, connect
 from services.common.config import SpacemapConfig
 from services.common.inventory import inventory_of
+from services.common.signals import stop_on_signals
 from services.edge_server.planner import EdgePlanner, PlanOutput
 
 log = logging.getLogger(__name__)
 
 POLL_S = 0.1
 REPORT_EVERY_PLANS = 50
-
-
-def _install_stop_handlers(stop: threading.Event) -> None:
-    if threading.current_thread() is not threading.main_thread():
-        return  # signal handlers can only be set from the main thread (embedded use)
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda *_: stop.set())
 
 
 def _subscribe(bus: Bus) -> None:
@@ -167,8 +160,7 @@ class EdgeNode:
 
 def main(config: SpacemapConfig) -> None:
     """Run the edge server until SIGTERM or SIGINT."""
-    stop = threading.Event()
-    _install_stop_handlers(stop)
+    stop = stop_on_signals()
     with connect(config.bus) as bus:
         node = EdgeNode(bus, config)
         _subscribe(bus)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import logging
-import signal
 import threading
 
 from schemas.messages import (
@@ -18,19 +17,13 @@ from schemas.messages import (
 )
 from services.common.bus import Bus, Inbound, Presence, connect
 from services.common.config import SpacemapConfig
+from services.common.signals import stop_on_signals
 from services.robot_agent.agent import AgentCore
 
 log = logging.getLogger(__name__)
 
 POLL_S = 0.1
 REPORT_EVERY_TICKS = 500
-
-
-def _install_stop_handlers(stop: threading.Event) -> None:
-    if threading.current_thread() is not threading.main_thread():
-        return  # signal handlers can only be set from the main thread (embedded use)
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda *_: stop.set())
 
 
 def _subscribe(bus: Bus, robot_id: int) -> None:
@@ -96,8 +89,7 @@ def _apply(core: AgentCore, msg: Message) -> None:
 
 def main(config: SpacemapConfig, robot_id: int) -> None:
     """Run robot `robot_id`'s agent until SIGTERM or SIGINT."""
-    stop = threading.Event()
-    _install_stop_handlers(stop)
+    stop = stop_on_signals()
     core = AgentCore(config.agent, robot_id, config.sim.tick_s, team_size=config.sim.robots - 1)
     with connect(config.bus) as bus:
         lock = threading.Lock()  # the inventory queryable runs on a zenoh thread
