@@ -12,7 +12,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from services.common.bus import connect
-from services.common.config import SpacemapConfig, load_config, write_config
+from services.common.config import SpacemapConfig, write_config
 from services.evaluator.evaluate import probe_for
 from services.launcher.monitor import Monitor
 from services.launcher.report import write_run_folder
@@ -213,9 +213,3 @@ def _status_line(monitor: Monitor) -> str:
     frontiers = len(monitor.frontiers.frontiers) if monitor.frontiers else 0
     states = " ".join(f"r{i}:{t.state or '-'}" for i, t in monitor.tracks.items())
     return f"known {area:6.1f} m²  frontiers {frontiers:3d}  {states}"
-
-
-def config_from_options(
-    config_path: Path | None, overrides: dict[str, object]
-) -> SpacemapConfig:
-    return load_config(config_path, overrides)
