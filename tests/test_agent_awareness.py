@@ -52,3 +52,11 @@ def test_vectorized_and_distance_term() -> None:
     b = angle_to_targets((1.0, 1.0, 0.0), np.array([[1.0, 3.0], [4.0, 5.0]]), 0.306)
     assert np.allclose(b.d, [2.0, 5.0])
     assert np.allclose(b.alpha, np.arctan(0.306 / np.array([2.0, 5.0])))
+
+
+def test_partial_range_is_depth_not_distance() -> None:
+    # at 40° off the axis, 6 m away is 4.6 m of depth: the camera sees it within γ = 5 m
+    a = math.radians(40.0)
+    xy = np.array([[6.0 * math.cos(a), 6.0 * math.sin(a)], [7.5 * math.cos(a), 7.5 * math.sin(a)]])
+    assert in_view_partial((0.0, 0.0, 0.0), xy, **KW).tolist() == [True, False]
+    assert not visible_paper((0.0, 0.0, 0.0), xy, **KW).any()  # the paper's test keeps d ≤ γ

@@ -133,6 +133,10 @@ def test_frame_mostly_hidden_by_a_teammate_keeps_the_odometry_guess() -> None:
     core = AgentCore(AgentConfig(), 0, 0.1)
     pts, T = _points_base((0.5, 0.3, 0.4)), T_from_xyyaw(0.5, 0.3, 0.4)
     core._register(pts, T, removed_frac=0.5)
-    assert core.registrar.n_inserted == 0  # not registered, not inserted in the local map
+    registrar = core.localizer.registrar
+    assert registrar.n_inserted == 1  # the first frame anchors the map whatever it shows
+    core._register(pts, T, removed_frac=0.5)
+    assert registrar.n_inserted == 1  # not registered, not inserted in the local map
+    assert core.localizer.outcomes["hidden by teammates"] == 1
     core._register(pts, T, removed_frac=0.1)
-    assert core.registrar.n_inserted == 1
+    assert registrar.n_inserted == 2

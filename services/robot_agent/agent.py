@@ -42,7 +42,7 @@ from services.robot_agent.drf import DrfParams, filter_mask
 from services.robot_agent.exploration import local_frontier_goal
 from services.robot_agent.local_grid import LocalGrid, floor_rays
 from services.robot_agent.local_map import KeyframeMapper, SubmapDelta
-from services.robot_agent.localization import FrameRegistrar, RegistrationParams, planar
+from services.robot_agent.localization import Localizer, RegistrationParams
 from services.robot_agent.navigation import Command, Navigator, StatusEvent, inflation_cells
 from services.robot_agent.projection import cam_to_base, depth_to_points, pixel_colors
 from services.robot_agent.teammates import predict_xy
@@ -81,6 +81,15 @@ def hfov_of(K: np.ndarray, width: int) -> float:
     return 2.0 * math.atan2(width / 2.0, K[0, 0])
 
 
+def registration_params(cfg: AgentConfig) -> RegistrationParams:
+    return RegistrationParams(
+        step_m=cfg.reg_step_m, step_per_m=cfg.reg_step_per_m, step_rad=cfg.reg_step_rad,
+        min_inlier_frac=cfg.reg_min_inlier_frac, map_horizon=cfg.reg_map_horizon,
+        map_voxel_m=cfg.reg_map_voxel_m, degenerate_ratio=cfg.reg_degenerate_ratio,
+        max_removed_frac=cfg.reg_max_removed_frac,
+    )
+
+
 def drf_params(cfg: AgentConfig) -> DrfParams:
     return DrfParams(
         c=cfg.drf_c, radius_m=cfg.robot_size_m, robot_top_m=cfg.robot_top_m,
@@ -103,16 +112,11 @@ class AgentCore:
         self.cancels: list[int] = []
         self.epoch: int | None = None  # first tick this process handled
         self.T_world_loc = np.eye(4)
-        self.T_loc_odom = np.eye(4)
         self.T_loc_submaps: dict[int, np.ndarray] = {}
         self.grid: LocalGrid | None = None
         self.edge_grid: OccupancyGrid | None = None
         self.mapper = KeyframeMapper(config)
-        self.registrar = FrameRegistrar(RegistrationParams(
-            step_m=config.reg_step_m, step_per_m=config.reg_step_per_m,
-            step_rad=config.reg_step_rad,
-            min_inlier_frac=config.reg_min_inlier_frac, map_horizon=config.reg_map_horizon,
-        ))
+        self.localizer = Localizer(registration_params(config))
         self.n_frames = 0
         self.nav = Navigator(config, tick_s)
         self.teammates: dict[int, RobotPose] = {}
@@ -198,9 +202,12 @@ class AgentCore:
         if frame is not None and not self.team_ready(odom.tick):
             frame = None  # a teammate of unknown pose would be mapped as a ghost
             self.frames_skipped += 1
-        T_loc_base = self.T_loc_odom @ T_odom_base
+        T_loc_base = self.localizer.guess(T_odom_base)
         points_base = cam = None
         if frame is not None:
+            if self.n_frames == 0:
+                log.info("robot %d: first frame at tick %d (%d skipped waiting for teammates)",
+                         self.robot_id, odom.tick, self.frames_skipped)
             cam, points_base = self._filtered_points(frame, T_loc_base, odom.tick)
             T_loc_base = self._register(points_base, T_odom_base, self._drf_removed_frac(frame))
         T_world_base = self.T_world_loc @ T_loc_base
@@ -320,20 +327,12 @@ class AgentCore:
 
     def _register(self, points_base: np.ndarray, T_odom_base: np.ndarray,
                   removed_frac: float = 0.0) -> np.ndarray:
-        """Registered T_loc_base (or the odometry guess); T_loc_odom takes up the drift found.
-
-        A frame mostly hidden by a teammate keeps the odometry guess: what is left is a sliver
-        of the scene GICP can slide on."""
-        guess = self.T_loc_odom @ T_odom_base
+        """Registered T_loc_base (or the odometry guess); T_loc_odom takes up the drift found."""
+        guess = self.localizer.guess(T_odom_base)
         self.n_frames += 1
         if not self.config.registration or (self.n_frames - 1) % self.config.register_every_frames:
             return guess
-        if removed_frac > self.config.reg_max_removed_frac:
-            return guess
-        outcome = self.registrar.register(points_base, guess, T_odom_base)
-        # planar() re-orthonormalises, so rounding cannot pile up over thousands of frames
-        self.T_loc_odom = planar(outcome.T_loc_base @ invert(T_odom_base))
-        return outcome.T_loc_base
+        return self.localizer.update(points_base, T_odom_base, removed_frac).T_loc_base
 
     def _integrate(
         self, frame: RgbdFrame, cam, points_base: np.ndarray, T_loc_base: np.ndarray,

@@ -69,11 +69,14 @@ def in_view_partial(
     pose_obs: tuple[float, float, float], xy_targets: np.ndarray, *, radius_m: float,
     fov_rad: float, range_m: float, c: float,
 ) -> np.ndarray:
-    """(N,) bool: some part of the robot circle grown by c/d is inside the FoV, within γ + R.
+    """(N,) bool: some part of the robot circle grown by c/d is inside the FoV, and its near
+    side within γ in depth.
 
-    The range test keeps the paper's γ but adds R, so a robot whose near side is at γ counts.
+    The camera clips z-depth (the distance along the optical axis) at γ, not the range: at
+    the image border a robot 6.7 m away is still within 5 m of depth, and missions mapped
+    such robots as ghosts. The circle's smallest depth is d·cos Δθ − R.
     """
     b = angle_to_targets(pose_obs, xy_targets, radius_m)
-    in_range = b.d <= range_m + radius_m
+    in_range = b.d * np.cos(b.dtheta) - radius_m <= range_m
     with np.errstate(invalid="ignore"):
         return in_range & (np.abs(b.dtheta) - b.alpha - _buffer(b.d, c) <= fov_rad / 2)

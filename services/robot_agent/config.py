@@ -52,6 +52,17 @@ class AgentConfig(BaseModel):
         default=0.2, ge=0, le=1, description="no registration when the DRF took more of a frame"
     )
     reg_min_inlier_frac: float = Field(default=0.5, ge=0, le=1)
+    # bench/bench_localization.py (replays of house and bookstore missions): a 5 cm Gaussian
+    # voxel map and dropping GICP's step along degenerate directions took the team map's ghost
+    # volume from 4.4 % (house) and 39.7 % (bookstore) to 0.0000 %; docs/agent.md.
+    reg_map_voxel_m: float = Field(
+        default=0.05, gt=0, description="Gaussian voxel map resolution (15 cm voxels biased "
+        "doorway registrations by up to 0.65° even on a perfect map)"
+    )
+    reg_degenerate_ratio: float = Field(
+        default=0.05, ge=0, lt=1, description="weak/strong translation information below this: "
+        "keep odometry along the weak direction (aisles, one wall); 0 = never"
+    )
     reg_map_horizon: int = Field(
         default=100_000, ge=1, description="registered frames a map voxel survives unobserved"
     )

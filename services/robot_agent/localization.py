@@ -17,12 +17,13 @@ fixed 8 cm / 0.05 rad gate letting GICP slide 10 cm and 1.6° within a few frame
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
 import small_gicp
 
-from services.common.geometry import T_from_xyyaw, wrap_angle, xyyaw_from_T
+from services.common.geometry import T_from_xyyaw, invert, wrap_angle, xyyaw_from_T
 
 
 @dataclass(frozen=True)
@@ -42,6 +43,9 @@ class RegistrationParams:
     cap_rad: float = 0.05  # 300 s missions drifted less with it than with a growing one)
     floor_z_m: float = 0.03  # floor points carry no planar information: dropped
     map_horizon: int = 100  # map voxels not re-observed in this many inserted frames are dropped
+    max_removed_frac: float = 0.2  # no registration of frames the DRF took more of
+    degenerate_ratio: float = 0.0  # weakest / strongest translation information below this:
+    # the correction along the weak direction is dropped (0 = never)
 
 
 @dataclass(frozen=True)
@@ -95,11 +99,11 @@ class FrameRegistrar:
         """Refine the guess against the map, then add the frame at the pose used.
 
         `T_odom_base` (the raw odometry) sizes the jump gate; without it the gate is the base."""
+        odom = T_loc_base_guess if T_odom_base is None else T_odom_base
         cloud = self._cloud(points_base)
         if cloud is None:
             return RegistrationOutcome(T_loc_base_guess, False, "too few points")
         outcome = RegistrationOutcome(T_loc_base_guess, False, "empty map")
-        odom = T_loc_base_guess if T_odom_base is None else T_odom_base
         if self.n_inserted > 0:
             outcome = self._align(cloud, T_loc_base_guess, self.gate(odom))
         if outcome.accepted or self.n_inserted == 0:
@@ -124,4 +128,57 @@ class FrameRegistrar:
         dx, dy, dyaw = xyyaw_from_T(np.linalg.inv(guess) @ T)
         if np.hypot(dx, dy) > gate[0] or abs(wrap_angle(dyaw)) > gate[1]:
             return RegistrationOutcome(guess, False, "implausible jump")
+        if p.degenerate_ratio > 0:
+            T = guess @ T_from_xyyaw(*drop_weak_translation(
+                np.array([dx, dy, dyaw]), res.H, p.degenerate_ratio))
         return RegistrationOutcome(T, True)
+
+
+def drop_weak_translation(step: np.ndarray, H6: np.ndarray, ratio: float) -> np.ndarray:
+    """The (dx, dy, dyaw) body-frame step without its part along a degenerate direction.
+
+    GICP's Hessian (small_gicp orders rx, ry, rz, tx, ty, tz; body-frame perturbation) gives
+    the translation information once yaw is marginalised out (Schur complement). Between shelf
+    rows or along one wall it is a hundred times weaker along the aisle than across it, and
+    GICP then walks the pose along the aisle by ~2 cm a frame; odometry is the better guess
+    there (solution remapping, Zhang et al. ICRA 2016)."""
+    H = np.asarray(H6)[np.ix_([3, 4, 2], [3, 4, 2])]
+    if H[2, 2] <= 0:
+        return step
+    Ht = H[:2, :2] - np.outer(H[:2, 2], H[2, :2]) / H[2, 2]
+    w, V = np.linalg.eigh(0.5 * (Ht + Ht.T))
+    if w[1] <= 0 or w[0] >= ratio * w[1]:
+        return step
+    weak = V[:, 0]
+    out = step.copy()
+    out[:2] -= weak * float(weak @ step[:2])
+    return out
+
+
+class Localizer:
+    """T_loc_odom, the drift registration found: T_loc_base = T_loc_odom · T_odom_base."""
+
+    def __init__(self, params: RegistrationParams) -> None:
+        self.registrar = FrameRegistrar(params)
+        self.T_loc_odom = np.eye(4)
+        self.outcomes: Counter[str] = Counter()  # "accepted" or the rejection reason
+
+    def guess(self, T_odom_base: np.ndarray) -> np.ndarray:
+        return self.T_loc_odom @ T_odom_base
+
+    def update(self, points_base: np.ndarray, T_odom_base: np.ndarray,
+               removed_frac: float = 0.0) -> RegistrationOutcome:
+        """Register one frame from the odometry guess; T_loc_odom takes up the drift found.
+
+        A frame mostly hidden by teammates (`removed_frac` of its pixels taken by the DRF)
+        keeps the guess and stays out of the map: what is left is a sliver GICP can slide on.
+        Except the first: robots start close together, and a map anchored only after the
+        initial turn in place would keep that turn's odometry error (0.44° in missions)."""
+        if removed_frac > self.registrar.params.max_removed_frac and self.registrar.n_inserted:
+            outcome = RegistrationOutcome(self.guess(T_odom_base), False, "hidden by teammates")
+        else:
+            outcome = self.registrar.register(points_base, self.guess(T_odom_base), T_odom_base)
+        self.outcomes["accepted" if outcome.accepted else outcome.reason] += 1
+        # planar() re-orthonormalises, so rounding cannot pile up over thousands of frames
+        self.T_loc_odom = planar(outcome.T_loc_base @ invert(T_odom_base))
+        return outcome

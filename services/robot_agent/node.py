@@ -72,8 +72,9 @@ def handle(
         if msg.tick and msg.tick % REPORT_EVERY_TICKS == 0:
             sim_s = msg.tick * tick_s
             key = bus.keys.submap(core.robot_id)
-            log.info("robot %d tick %d: submap traffic %.1f kB per sim second",
-                     core.robot_id, msg.tick, bus.bytes_out[key] / 1000.0 / sim_s)
+            log.info("robot %d tick %d: submap traffic %.1f kB per sim second; "
+                     "registrations %s", core.robot_id, msg.tick,
+                     bus.bytes_out[key] / 1000.0 / sim_s, dict(core.localizer.outcomes))
 
 
 def _apply(core: AgentCore, msg: Message) -> None:
