@@ -52,7 +52,7 @@ class Recording:
     ticks: np.ndarray  # (T,) every tick of the run
     poses: np.ndarray  # (R, T, 3) true x, y, yaw per tick
     frame_ticks: np.ndarray  # (F,) ticks with a camera frame
-    depth: np.ndarray  # (R, F, H, W) float16 metres, 0 = none
+    depth: np.ndarray  # (R, F, H, W) float32 metres, 0 = none
     teammate: np.ndarray  # (R, F, H, W) bool: a robot's pixel (from the segmentation)
     K: np.ndarray
     T_base_cam: np.ndarray  # (R, 4, 4)
@@ -86,7 +86,7 @@ def record(run_dir: Path) -> Recording:
         row = []
         for i in range(sim.n_robots):
             img = sim.render(i, segmentation=True)
-            row.append((img.depth_m.astype(np.float16),
+            row.append((img.depth_m,
                         np.isin(img.segmentation, robot_geoms) & (img.depth_m > 0)))
         depth.append(row)
     rec = Recording(ticks, poses, frame_ticks,

@@ -91,6 +91,21 @@ def test_depth_noise_is_seeded_and_grows_with_depth() -> None:
     assert 0.005 < err.std() < 0.02
 
 
+def test_depth_noise_adds_no_returns_from_the_sky() -> None:
+    # GL's background depth is the far plane (~1 km); noise ∝ depth² must not pull any of it
+    # into range (3 % of such pixels did: mid-air ghosts in missions)
+    cfg = SimConfig(world="house", robots=1, depth_noise_per_m2=0.0005, seed=3)
+    noisy, clean = Simulation(cfg), Simulation(cfg.model_copy(update={"depth_noise_per_m2": 0}))
+    d0 = clean.render(0).depth_m
+    assert (d0 == 0).sum() > 1000  # the spawn view has sky above the walls
+    for _ in range(3):  # three noise draws
+        dn = noisy.render(0).depth_m
+        new = (dn > 0) & (d0 == 0)
+        assert (dn[new] > cfg.range_m - 0.1).all()  # only surfaces just past the range
+    noisy.close()
+    clean.close()
+
+
 def test_segmentation_labels_a_teammate_ahead() -> None:
     cfg = SimConfig(world="house", robots=2, spawn=[(6.0, 1.5, 0.0), (7.5, 1.5, 0.0)])
     sim = Simulation(cfg)

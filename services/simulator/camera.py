@@ -226,12 +226,14 @@ class RgbdCamera:
             img = self._render_raycast(data, ids)
             if not segmentation:
                 img = RgbdImage(img.rgb, img.depth_m)
-        depth = img.depth_m
+        depth = np.where((img.depth_m > 0) & (img.depth_m <= self.range_m), img.depth_m, 0)
         if self.depth_noise_per_m2 > 0 and rng is not None:
-            # Kinect-like: standard deviation grows with the square of the depth.
+            # Kinect-like: standard deviation grows with the square of the depth. Only returns
+            # get noise: the far plane's ~1 km "depth" would land 3 % of the sky within range.
             noise = rng.standard_normal(depth.shape).astype(np.float32)
             depth = depth + noise * np.float32(self.depth_noise_per_m2) * depth * depth
-        depth = np.where((depth > 0) & (depth <= self.range_m), depth, 0).astype(np.float32)
+            depth = np.where((depth > 0) & (depth <= self.range_m), depth, 0)
+        depth = depth.astype(np.float32)
         return RgbdImage(img.rgb, depth, img.segmentation)
 
     def close(self) -> None:
