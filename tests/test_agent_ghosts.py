@@ -127,15 +127,16 @@ def test_robot_does_not_drive_into_a_teammate_the_drf_hides() -> None:
     assert stale == Command(0.3, 0.2)
 
 
-def test_frame_mostly_hidden_by_a_teammate_corrects_only_the_yaw() -> None:
-    from services.common.geometry import T_from_xyyaw, xyyaw_from_T
+def test_frame_mostly_hidden_by_a_teammate_keeps_the_odometry_guess() -> None:
+    from services.common.geometry import T_from_xyyaw
 
     core = AgentCore(AgentConfig(), 0, 0.1)
-    true = (0.5, 0.3, 0.4)
-    pts = _points_base(true)
-    core._register(pts, T_from_xyyaw(*true), removed_frac=0.5)  # the first frame anchors
-    off = T_from_xyyaw(true[0] + 0.03, true[1] - 0.02, true[2] + 0.02)  # odometry 3 cm, 1° off
-    x, y, yaw = xyyaw_from_T(core._register(pts, off, removed_frac=0.5))
-    assert abs(yaw - true[2]) < 0.004  # the yaw is registered ...
-    assert abs(x - (true[0] + 0.03)) < 1e-9 and abs(y - (true[1] - 0.02)) < 1e-9  # ... not xy
-    assert core.localizer.outcomes["hidden: yaw only"] == 1
+    pts, T = _points_base((0.5, 0.3, 0.4)), T_from_xyyaw(0.5, 0.3, 0.4)
+    core._register(pts, T, removed_frac=0.5)
+    registrar = core.localizer.registrar
+    assert registrar.n_inserted == 1  # the first frame anchors the map whatever it shows
+    core._register(pts, T, removed_frac=0.5)
+    assert registrar.n_inserted == 1  # not registered, not inserted in the local map
+    assert core.localizer.outcomes["hidden by teammates"] == 1
+    core._register(pts, T, removed_frac=0.1)
+    assert registrar.n_inserted == 2

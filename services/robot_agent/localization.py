@@ -94,7 +94,7 @@ class FrameRegistrar:
 
     def register(
         self, points_base: np.ndarray, T_loc_base_guess: np.ndarray,
-        T_odom_base: np.ndarray | None = None, yaw_only: bool = False,
+        T_odom_base: np.ndarray | None = None,
     ) -> RegistrationOutcome:
         """Refine the guess against the map, then add the frame at the pose used.
 
@@ -105,7 +105,7 @@ class FrameRegistrar:
             return RegistrationOutcome(T_loc_base_guess, False, "too few points")
         outcome = RegistrationOutcome(T_loc_base_guess, False, "empty map")
         if self.n_inserted > 0:
-            outcome = self._align(cloud, T_loc_base_guess, self.gate(odom), yaw_only)
+            outcome = self._align(cloud, T_loc_base_guess, self.gate(odom))
         if outcome.accepted or self.n_inserted == 0:
             self.T_odom_accepted = odom.copy()
             self.n_accepted += int(outcome.accepted)
@@ -114,7 +114,7 @@ class FrameRegistrar:
         return outcome
 
     def _align(self, cloud: small_gicp.PointCloud, guess: np.ndarray,
-               gate: tuple[float, float], yaw_only: bool = False) -> RegistrationOutcome:
+               gate: tuple[float, float]) -> RegistrationOutcome:
         p = self.params
         res = small_gicp.align(
             self.voxelmap, cloud, guess, max_correspondence_distance=p.max_corr_m,
@@ -128,8 +128,6 @@ class FrameRegistrar:
         dx, dy, dyaw = xyyaw_from_T(np.linalg.inv(guess) @ T)
         if np.hypot(dx, dy) > gate[0] or abs(wrap_angle(dyaw)) > gate[1]:
             return RegistrationOutcome(guess, False, "implausible jump")
-        if yaw_only:
-            return RegistrationOutcome(guess @ T_from_xyyaw(0.0, 0.0, dyaw), True)
         if p.degenerate_ratio > 0:
             T = guess @ T_from_xyyaw(*drop_weak_translation(
                 np.array([dx, dy, dyaw]), res.H, p.degenerate_ratio))
@@ -173,15 +171,14 @@ class Localizer:
         """Register one frame from the odometry guess; T_loc_odom takes up the drift found.
 
         A frame mostly hidden by teammates (`removed_frac` of its pixels taken by the DRF)
-        corrects the yaw only: what is left is a sliver GICP can slide on. Robots start side by
-        side and turn in place there, hidden from each other for a minute: skipping those
-        frames left the turn's odometry yaw error (0.5-1°) in the map for good."""
-        hidden = removed_frac > self.registrar.params.max_removed_frac
-        outcome = self.registrar.register(points_base, self.guess(T_odom_base), T_odom_base,
-                                          yaw_only=hidden)
-        if hidden and outcome.accepted:
-            outcome = RegistrationOutcome(outcome.T_loc_base, True, "hidden: yaw only")
-        self.outcomes[outcome.reason or "accepted"] += 1
+        keeps the guess and stays out of the map: what is left is a sliver GICP can slide on.
+        Except the first: robots start close together, and a map anchored only after the
+        initial turn in place would keep that turn's odometry error (0.44° in missions)."""
+        if removed_frac > self.registrar.params.max_removed_frac and self.registrar.n_inserted:
+            outcome = RegistrationOutcome(self.guess(T_odom_base), False, "hidden by teammates")
+        else:
+            outcome = self.registrar.register(points_base, self.guess(T_odom_base), T_odom_base)
+        self.outcomes["accepted" if outcome.accepted else outcome.reason] += 1
         # planar() re-orthonormalises, so rounding cannot pile up over thousands of frames
         self.T_loc_odom = planar(outcome.T_loc_base @ invert(T_odom_base))
         return outcome
