@@ -51,3 +51,14 @@ def decode(
         first = exc.errors()[0]
         where = ".".join(str(p) for p in first["loc"])
         raise DecodeError(f"invalid {kind}", f"{where}: {first['msg']}") from exc
+
+
+def peek_tick(payload: bytes) -> int | None:
+    """The `tick` field of an encoded message without validating the rest (traffic
+    accounting); None when the payload is no msgpack map with a non-negative integer tick."""
+    try:
+        obj = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+    except (ValueError, msgpack.ExtraData, msgpack.FormatError, msgpack.StackError):
+        return None
+    tick = obj.get("tick") if isinstance(obj, dict) else None
+    return tick if isinstance(tick, int) and not isinstance(tick, bool) and tick >= 0 else None

@@ -166,3 +166,16 @@ def test_keys() -> None:
         Keys("bad/*")
     with pytest.raises(ValueError):
         keys.robot_id("mission1/map/grid")
+
+
+def test_peek_tick_reads_the_tick_and_rejects_anything_else() -> None:
+    from schemas.codec import peek_tick
+
+    pose = m.RobotPose(robot_id=1, tick=42, stamp_ns=4_200_000_000,
+                       pose_world=m.Pose2D(x=1.0, y=2.0, yaw=0.5))
+    assert peek_tick(encode(pose)) == 42
+    assert peek_tick(b"\xc1garbage") is None
+    assert peek_tick(msgpack.packb([1, 2, 3])) is None
+    assert peek_tick(msgpack.packb({"tick": -1})) is None
+    assert peek_tick(msgpack.packb({"tick": True})) is None
+    assert peek_tick(msgpack.packb({"kind": "pose"})) is None

@@ -133,11 +133,11 @@ class Bus:
 
         self._handles.append(self.session.declare_subscriber(key_expr, _direct(on_sample)))
 
-    def tap(self, key_expr: str, on_bytes: Callable[[str, int], None]) -> None:
-        """Count payload sizes on `key_expr` without decoding (runs on a zenoh thread)."""
+    def tap(self, key_expr: str, on_payload: Callable[[str, bytes], None]) -> None:
+        """Raw payloads on `key_expr`, undecoded, in arrival order (runs on a zenoh thread)."""
 
         def on_sample(sample: zenoh.Sample) -> None:
-            on_bytes(str(sample.key_expr), len(sample.payload.to_bytes()))
+            on_payload(str(sample.key_expr), sample.payload.to_bytes())
 
         self._handles.append(self.session.declare_subscriber(key_expr, _direct(on_sample)))
 

@@ -6,12 +6,16 @@ reads `eval/` keys, and no service reads what it collects.
 
 from __future__ import annotations
 
+import logging
 import threading
 from collections import Counter, OrderedDict
 from dataclasses import dataclass, field
 
 from schemas import messages as m
+from schemas.codec import peek_tick
 from services.common.bus import Bus, Inbound, Presence
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -64,7 +68,8 @@ class Monitor:
         self.alive: set[tuple[str, str]] = set()
         self.ever_alive: set[tuple[str, str]] = set()
         self.series: list[Snapshot] = []
-        self._bytes: Counter[int] = Counter()
+        self._bytes: Counter[tuple[int, int]] = Counter()  # (robot, tick) → payload bytes
+        self.bad_taps: Counter[str] = Counter()
         self._bytes_lock = threading.Lock()
         keys = bus.keys
         bus.subscribe(keys.clock(), m.Clock)
@@ -79,14 +84,31 @@ class Monitor:
         bus.watch_liveliness()
         bus.declare_alive("monitor", 0)
 
-    def _count(self, key: str, nbytes: int) -> None:
-        robot = self.bus.keys.robot_id(key)
+    def _count(self, key: str, payload: bytes) -> None:
+        """Bytes per (robot, tick): the tick, not the arrival time, decides what counts, so a
+        lockstep run's totals do not depend on which of the last tick's messages arrived before
+        the run was read out."""
+        try:
+            robot = self.bus.keys.robot_id(key)
+        except ValueError:
+            robot = None
+        tick = peek_tick(payload)
+        if robot is None or tick is None:
+            self.bad_taps[key] += 1
+            if self.bad_taps[key] == 1:
+                log.warning("dropped an undecodable message on %s (not counted)", key)
+            return
         with self._bytes_lock:
-            self._bytes[robot] += nbytes
+            self._bytes[(robot, tick)] += len(payload)
 
-    def bytes_per_robot(self) -> dict[int, int]:
+    def bytes_per_robot(self, before_tick: int | None = None) -> dict[int, int]:
+        """Payload bytes each robot published for ticks < `before_tick` (all when None)."""
         with self._bytes_lock:
-            return {i: int(self._bytes.get(i, 0)) for i in range(self.robots)}
+            total: Counter[int] = Counter()
+            for (robot, tick), n in self._bytes.items():
+                if before_tick is None or tick < before_tick:
+                    total[robot] += n
+        return {i: int(total.get(i, 0)) for i in range(self.robots)}
 
     def trim_to_common_tick(self) -> None:
         """Cut ground-truth tracks to the last stamp every robot reached, so a run's files do

@@ -201,7 +201,7 @@ def _live_fields(
         "wall_time_s": wall_s,
         "bytes_per_robot": {
             str(r): {"total": b, "per_sim_s": b / per_s}
-            for r, b in monitor.bytes_per_robot().items()
+            for r, b in monitor.bytes_per_robot(before_tick=round(sim_s / tick_s)).items()
         },
         "sample_every_s": sample_every_s,
     }
