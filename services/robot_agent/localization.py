@@ -43,7 +43,7 @@ class RegistrationParams:
     cap_rad: float = 0.05  # 300 s missions drifted less with it than with a growing one)
     floor_z_m: float = 0.03  # floor points carry no planar information: dropped
     map_horizon: int = 100  # map voxels not re-observed in this many inserted frames are dropped
-    max_removed_frac: float = 0.35 # no registration of frames the DRF took more of
+    max_removed_frac: float = 0.35  # no registration of frames the DRF took more of
     degenerate_ratio: float = 0.0  # weakest / strongest translation information below this:
     # the correction along the weak direction is dropped (0 = never)
 
