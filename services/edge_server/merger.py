@@ -20,15 +20,15 @@ import numpy as np
 from gtsam import Pose3
 
 from services.common.geometry import invert
-from services.common.voxels import centres, unpack
-from services.edge_server.pose_graph import Between, Prior, info_diag, optimize
-from services.edge_server.registration import (
+from services.common.pose_graph import Between, Prior, info_diag, optimize
+from services.common.registration import (
     Prepared,
     RegistrationParams,
     prepare,
     register,
     world_box,
 )
+from services.common.voxels import centres, unpack
 from services.edge_server.submap_store import StoredSubmap, SubmapKey, SubmapStore
 
 log = logging.getLogger(__name__)

@@ -37,9 +37,11 @@ from schemas.messages import (
 from services.common.geometry import T_from_xyyaw, invert, transform_points, xyyaw_from_T
 from services.common.inventory import inventory_of
 from services.robot_agent.awareness import in_view_partial, visible_paper
+from services.robot_agent.back_end import BackEnd
 from services.robot_agent.config import AgentConfig
 from services.robot_agent.drf import DrfParams, filter_mask
 from services.robot_agent.exploration import local_frontier_goal
+from services.robot_agent.keyframe_graph import LoopParams
 from services.robot_agent.local_grid import LocalGrid, floor_rays
 from services.robot_agent.local_map import KeyframeMapper, SubmapDelta
 from services.robot_agent.localization import Localizer, RegistrationParams
@@ -90,6 +92,11 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
     )
 
 
+def loop_params(cfg: AgentConfig) -> LoopParams:
+    return LoopParams(search_radius_m=cfg.loop_search_radius_m,
+                      max_candidates=cfg.loop_max_candidates)
+
+
 def drf_params(cfg: AgentConfig) -> DrfParams:
     return DrfParams(
         c=cfg.drf_c, radius_m=cfg.robot_size_m, robot_top_m=cfg.robot_top_m,
@@ -112,11 +119,12 @@ class AgentCore:
         self.cancels: list[int] = []
         self.epoch: int | None = None  # first tick this process handled
         self.T_world_loc = np.eye(4)
-        self.T_loc_submaps: dict[int, np.ndarray] = {}
         self.grid: LocalGrid | None = None
         self.edge_grid: OccupancyGrid | None = None
         self.mapper = KeyframeMapper(config)
         self.localizer = Localizer(registration_params(config))
+        self.back_end = BackEnd(loop_params(config), config.voxel_m, robot_id) \
+            if config.loop_closure and config.registration else None
         self.n_frames = 0
         self.nav = Navigator(config, tick_s)
         self.teammates: dict[int, RobotPose] = {}
@@ -181,10 +189,10 @@ class AgentCore:
     def on_correction(self, corr: Correction) -> None:
         """Move the loc frame so the newest corrected submap we know lands on its pose."""
         known = [(int(i), T) for i, T in zip(corr.submap_ids, corr.T_world_submap, strict=True)
-                 if int(i) in self.T_loc_submaps]
+                 if self.mapper.pose_of(int(i)) is not None]
         if known:
             sid, T_world_submap = max(known, key=lambda item: item[0])
-            self.T_world_loc = T_world_submap @ invert(self.T_loc_submaps[sid])
+            self.T_world_loc = T_world_submap @ invert(self.mapper.pose_of(sid))
 
     # -- the tick ----------------------------------------------------------------------------
     def on_odometry(self, odom: Odometry) -> list[Outgoing]:
@@ -344,8 +352,13 @@ class AgentCore:
         if self.mapper.needs_keyframe(T_loc_base, tick):
             delta = self.mapper.take_delta()
             out += [delta] if delta is not None else []
+            closed = self.mapper.current
             sub = self.mapper.start_keyframe(T_loc_base, tick)
-            self.T_loc_submaps[sub.submap_id] = sub.T_odom_submap
+            if self.back_end is not None:
+                T_new_old = self.back_end.on_keyframe(closed, sub, self.mapper, self.localizer)
+                T_loc_base = T_new_old @ T_loc_base
+                T_world_base = self.T_world_loc @ T_loc_base
+                out += self.mapper.take_pose_updates()
         free_base = floor_rays(
             points_base, frame.T_base_cam[:2, 3], cfg.obstacle_z_min_m, cfg.obstacle_z_max_m,
             cfg.cell_m, cfg.ray_bin_rad,

@@ -57,6 +57,7 @@ class VoxelSubmap:
         self.free_seen: np.ndarray | None = np.zeros((2 * _FREE_HALF, 2 * _FREE_HALF), bool)
         self.free_done = np.empty((2, 0), np.int64)  # replaces free_seen once finished
         self.pending_free: list[np.ndarray] = []  # (2, M) int64 (x, y) cell batches
+        self.pose_dirty = False  # the back end moved it: the next delta carries the new pose
 
     def __len__(self) -> int:
         return int(self.keys.size)
@@ -132,8 +133,9 @@ class VoxelSubmap:
         if color_resend > 0:
             moved = np.abs(colors - self.sent_colors).max(axis=1, initial=0) >= color_resend
             dirty |= moved & (self.sent_counts > 0)
-        if not dirty.any() and not self.pending_free:
+        if not dirty.any() and not self.pending_free and not self.pose_dirty:
             return None
+        self.pose_dirty = False
         self.sent_counts[dirty] = self.counts[dirty]
         self.sent_colors[dirty] = colors[dirty]
         centres = voxels.centres(voxels.unpack(self.keys[dirty]), voxel_m)
@@ -193,6 +195,33 @@ class KeyframeMapper:
         if self.current is None:
             return None
         return self.current.take_delta(self.config.voxel_m, self.config.color_resend)
+
+    def submaps(self) -> list[VoxelSubmap]:
+        """Every submap, oldest first, the open one last."""
+        return [*self.done, *([self.current] if self.current is not None else [])]
+
+    def pose_of(self, submap_id: int) -> np.ndarray | None:
+        """T_loc_submap of a submap this agent made (None for an unknown id)."""
+        for sub in reversed(self.submaps()):
+            if sub.submap_id == submap_id:
+                return sub.T_odom_submap
+        return None
+
+    def set_poses(self, poses: dict[int, np.ndarray]) -> None:
+        """Move submaps (their voxels stay in their own frame) and queue the new poses."""
+        for sub in self.submaps():
+            if sub.submap_id in poses:
+                sub.T_odom_submap = np.asarray(poses[sub.submap_id], np.float64).copy()
+                sub.pose_dirty = True
+
+    def take_pose_updates(self) -> list[SubmapDelta]:
+        """Pose-only deltas of finished submaps the back end moved."""
+        out = []
+        for sub in self.done:
+            if sub.pose_dirty:
+                delta = sub.take_delta(self.config.voxel_m, self.config.color_resend)
+                out += [delta] if delta is not None else []
+        return out
 
     def published(self) -> list[tuple[int, int]]:
         """(submap id, voxels sent at least once) of every submap, oldest first."""
