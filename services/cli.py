@@ -214,6 +214,7 @@ def run(
         "bounding_volume_pct",
         "t90_s",
         "total_distance_m",
+        "ate_rmse_cm",
     ):
         typer.echo(f"  {key}: {metrics.get(key)}")
 

@@ -18,6 +18,7 @@ def _records() -> list[dict]:
         for seed, (c, b) in enumerate(zip(cov, bv, strict=True)):
             out.append({"world_label": "house", "robots": 3, "method": method, "seed": seed,
                         "coverage_3d_pct": c, "bounding_volume_pct": b, "rmse_3d_cm": 3.0,
+                        "ate_rmse_cm": 2.0 + seed if method == "space" else 4.0,
                         "overlap_3d_pct": None if seed else 40.0, "completed": seed == 0})
     return out
 
@@ -32,6 +33,7 @@ def test_table_markdown_has_mean_pm_std_per_method() -> None:
     md = tb.table_markdown(_records(), tb.TABLE1_METHODS, tb.TABLE1_METRICS, "Table I")
     assert "| metric | standalone | space |" in md
     assert "| 3D coverage (%) | 65.0 ± 7.1 | 85.0 ± 7.1 |" in md
+    assert "| 3D RMSE (cm) | 3.0 ± 0.0 | 3.0 ± 0.0 |\n| ATE (cm) | 4.0 ± 0.0 | 2.5 ± 0.7 |" in md
     assert "(n=1/2)" in md  # a null overlap is counted, not averaged in
     assert "2D coverage (%) | n/a | n/a" in md
     md2 = tb.table_markdown(_records(), ("space",), {"completed": "completed runs"}, "II")

@@ -40,6 +40,10 @@ def test_run_folder_has_every_metric_and_artefact(bench_dir: Path) -> None:
         assert list(metrics) == list(METRICS_KEYS)
         assert metrics["coverage_3d_pct"] > 0 and metrics["total_distance_m"] > 0
         assert metrics["overlap_3d_pct"] is not None and metrics["sim_time_s"] == 10.0
+        # estimates are published every tick, in the world frame: every robot has an ATE
+        assert len(metrics["ate_rmse_cm_per_robot"]) == 2
+        assert all(0.0 <= a < 50.0 for a in metrics["ate_rmse_cm_per_robot"])
+        assert metrics["ate_rmse_cm"] == pytest.approx(sum(metrics["ate_rmse_cm_per_robot"]) / 2)
         for name in ("merged_map.ply", "robot_0_map.ply", "robot_1_map.ply", "grid.pgm",
                      "trajectory_0_gt.tum", "timeseries.csv", "report.md", "live.json"):
             assert (run / name).stat().st_size > 0, name
@@ -64,13 +68,19 @@ def test_eval_recomputes_run_metrics(bench_dir: Path) -> None:
 
 
 def test_eval_notices_a_changed_map(bench_dir: Path) -> None:
-    """The recomputed fields really come from the files: copy robot 0's map over robot 1's."""
+    """The recomputed fields really come from the files: copy robot 0's map and estimated
+    trajectory over robot 1's."""
     run = _run_dirs(bench_dir)[0]
     recorded = json.loads((run / "metrics.json").read_text())
     tampered = run.parent.parent / "tampered"
     shutil.copytree(run, tampered)
     (tampered / "robot_1_map.ply").write_bytes((tampered / "robot_0_map.ply").read_bytes())
-    assert evaluate_run_folder(tampered)["overlap_3d_pct"] != recorded["overlap_3d_pct"]
+    (tampered / "trajectory_1_est.tum").write_bytes(
+        (tampered / "trajectory_0_est.tum").read_bytes())
+    again = evaluate_run_folder(tampered)
+    assert again["overlap_3d_pct"] != recorded["overlap_3d_pct"]
+    # robot 0's path is ≥ 0.34 m (two robot radii) from robot 1's at every instant
+    assert again["ate_rmse_cm_per_robot"][1] > recorded["ate_rmse_cm_per_robot"][1] + 20.0
 
 
 def test_tables_and_figures(bench_dir: Path) -> None:
@@ -78,5 +88,6 @@ def test_tables_and_figures(bench_dir: Path) -> None:
     assert "| metric | standalone | space |" in t1 and " ± " in t1
     assert "house, 2 robots" in (bench_dir / "tables.md").read_text()
     assert "coverage_3d_pct" in (bench_dir / "table2.csv").read_text()
+    assert "| ATE (cm) |" in t1
     fig = bench_dir / "fig5_house_2r.png"
     assert fig.stat().st_size > 10_000

@@ -50,11 +50,18 @@ class RunConfig:
                 "drf": self.drf, "seed": self.sim.seed}
 
 
-def load_tracks(run_dir: Path, robots: int) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(stamps_s, xy) of each robot's ground-truth trajectory."""
+def load_tracks(
+    run_dir: Path, robots: int, estimated: bool = False
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(stamps_s, xy) of each robot's ground-truth (or estimated) trajectory; a missing
+    estimate file reads as an empty trajectory (it has no ATE, the run stays evaluable)."""
     out = []
     for robot in range(robots):
-        stamps, xyyaw = rf.read_tum(rf.gt_trajectory_path(run_dir, robot))
+        path = (rf.est_trajectory_path if estimated else rf.gt_trajectory_path)(run_dir, robot)
+        if estimated and not path.exists():
+            out.append((np.zeros(0), np.zeros((0, 2))))
+            continue
+        stamps, xyyaw = rf.read_tum(path)
         out.append((stamps, xyyaw[:, :2]))
     return out
 
@@ -85,6 +92,7 @@ def evaluate_run_folder(run_dir: Path, probe: Probe | None = None) -> dict[str, 
         _optional_grid(run_dir / rf.MERGED_GRID),
         _robot_grids(run_dir, robots),
         load_tracks(run_dir, robots),
+        load_tracks(run_dir, robots, estimated=True),
         [r for r in series if r.get("coverage_3d_pct") is not None],
         live,
         config.identity(),

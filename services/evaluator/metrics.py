@@ -18,8 +18,8 @@ from services.common.grid import GridSpec
 METRICS_KEYS = (
     "coverage_3d_pct", "coverage_2d_pct", "overlap_3d_pct", "overlap_2d_pct", "rmse_3d_cm",
     "bounding_volume_pct", "mapping_time_s", "t90_s", "t99_s", "total_distance_m",
-    "bytes_per_robot", "sim_time_s", "wall_time_s", "robots", "world", "planner", "drf", "seed",
-    "completed",
+    "bytes_per_robot", "ate_rmse_cm", "ate_rmse_cm_per_robot", "sim_time_s", "wall_time_s",
+    "robots", "world", "planner", "drf", "seed", "completed",
 )
 
 
@@ -138,6 +138,82 @@ def path_length(trajectory_xy: np.ndarray) -> float:
     """Length (m) of a (T, 2) or (T, 3) polyline."""
     traj = np.asarray(trajectory_xy, dtype=np.float64)
     return float(np.linalg.norm(np.diff(traj, axis=0), axis=1).sum()) if len(traj) > 1 else 0.0
+
+
+# evo's default association window (`evo_ape --t_max_diff`); a tick is 0.1 s, so at most one
+# pose of the other trajectory lies this close
+ASSOCIATE_MAX_DIFF_S = 0.01
+
+
+def associate_stamps(
+    stamps_ref: np.ndarray, stamps_est: np.ndarray, max_diff_s: float = ASSOCIATE_MAX_DIFF_S
+) -> tuple[np.ndarray, np.ndarray]:
+    """(ref indices, est indices) of poses at matching times, exactly as evo's nearest-time
+    sync (`evo.core.sync.associate_trajectories(ref, est)`) pairs them: every pose of the
+    trajectory with fewer poses (est on a tie) takes the nearest stamp of the other within
+    max_diff_s, the earlier one on a tie, or is dropped; a pose of the longer one may serve
+    twice. Like evo, a repeated stamp pairs with its last copy, except when the longer
+    trajectory's stamps are out of order (never so in a run folder): then evo's linear search,
+    which takes the first nearest stamp in file order."""
+    ref = np.asarray(stamps_ref, dtype=np.float64).ravel()
+    est = np.asarray(stamps_est, dtype=np.float64).ravel()
+    if len(ref) == 0 or len(est) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    est_longer = len(est) > len(ref)
+    short, long = (ref, est) if est_longer else (est, ref)
+    if np.any(np.diff(long) < 0):
+        i_short, i_long = _nearest_linear(short, long, max_diff_s)
+        return (i_short, i_long) if est_longer else (i_long, i_short)
+    # the same float operations as evo's binary search, so borderline stamps match alike
+    idx = np.minimum(np.searchsorted(long, short, side="right"), len(long) - 1)
+    diff_ub = long[idx] - short
+    diff_lb = np.where(idx > 0, short - long[idx - 1], np.inf)
+    take_ub = (diff_ub <= max_diff_s) & (diff_ub < diff_lb)
+    take_lb = ~take_ub & (diff_lb <= max_diff_s) & (diff_lb <= diff_ub)
+    in_range = (short >= long[0] - max_diff_s) & (short <= long[-1] + max_diff_s)
+    keep = in_range & (take_ub | take_lb)
+    i_short = np.flatnonzero(keep)
+    i_long = np.where(take_ub, idx, idx - 1)[keep]
+    return (i_short, i_long) if est_longer else (i_long, i_short)
+
+
+def _nearest_linear(
+    short: np.ndarray, long: np.ndarray, max_diff_s: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """evo's fallback for unsorted stamps: argmin of |long - s| for each s, in row chunks."""
+    rows = max(1, 4_000_000 // len(long))  # bounds the (rows, len(long)) distance matrix
+    i_short, i_long = [], []
+    for start in range(0, len(short), rows):
+        diff = np.abs(long[None, :] - short[start:start + rows, None])
+        best = np.argmin(diff, axis=1)
+        ok = np.flatnonzero(diff[np.arange(len(best)), best] <= max_diff_s)
+        i_short.append(start + ok)
+        i_long.append(best[ok])
+    return np.concatenate(i_short), np.concatenate(i_long)
+
+
+def ate_rmse_cm(
+    stamps_gt: np.ndarray, positions_gt: np.ndarray, stamps_est: np.ndarray,
+    positions_est: np.ndarray, max_diff_s: float = ASSOCIATE_MAX_DIFF_S,
+) -> float | None:
+    """Absolute trajectory error (cm): RMS of the position error over the associated poses,
+    translation only and without alignment (start poses are known, estimates are in the world
+    frame); `evo_ape tum GT EST` × 100. None when no pose pairs up.
+
+    positions: (T, 2) or (T, 3) world coordinates, the same dimension on both sides."""
+    i_gt, i_est = associate_stamps(stamps_gt, stamps_est, max_diff_s)
+    if len(i_gt) == 0:
+        return None
+    gt = np.asarray(positions_gt, dtype=np.float64)[i_gt]
+    est = np.asarray(positions_est, dtype=np.float64)[i_est]
+    error = np.linalg.norm(est - gt, axis=1)
+    return float(np.sqrt(np.mean(error**2)) * 100.0)
+
+
+def mean_ate_cm(per_robot_cm: Sequence[float | None]) -> float | None:
+    """Mean over the robots that have an ATE (a robot without estimated poses has none)."""
+    values = [v for v in per_robot_cm if v is not None]
+    return float(np.mean(values)) if values else None
 
 
 def t_at_coverage(times_s: np.ndarray, coverage_pct: np.ndarray, pct: float) -> float | None:

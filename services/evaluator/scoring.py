@@ -136,13 +136,17 @@ def score(
     merged_grid: m.OccupancyGrid | None,
     robot_grids: Sequence[m.OccupancyGrid] | None,
     tracks: Sequence[tuple[np.ndarray, np.ndarray]],
+    est_tracks: Sequence[tuple[np.ndarray, np.ndarray]],
     series: Sequence[dict[str, Any]],
     live: dict[str, Any],
     identity: dict[str, Any],
 ) -> dict[str, Any]:
-    """Every SPEC §7 key. `series` rows need sim_time_s and coverage_3d_pct (T90/T99);
+    """Every SPEC §7 key. `tracks` / `est_tracks`: (stamps_s, xy) of each robot's ground-truth
+    and estimated trajectory; `series` rows need sim_time_s and coverage_3d_pct (T90/T99);
     `live` holds LIVE_KEYS; `identity` holds robots, world, planner, drf, seed."""
     quality = map_quality(probe, merged_points_world, robot_points)
+    ate = [mx.ate_rmse_cm(t_gt, xy_gt, t_est, xy_est)
+           for (t_gt, xy_gt), (t_est, xy_est) in zip(tracks, est_tracks, strict=True)]
     times = np.array([r["sim_time_s"] for r in series], dtype=np.float64)
     cov = np.array([r["coverage_3d_pct"] for r in series], dtype=np.float64)
     return mx.assemble_metrics(
@@ -155,6 +159,8 @@ def score(
         t90_s=mx.t_at_coverage(times, cov, 90.0),
         t99_s=mx.t_at_coverage(times, cov, 99.0),
         total_distance_m=sum(mx.path_length(xy) for _, xy in tracks),
+        ate_rmse_cm=mx.mean_ate_cm(ate),
+        ate_rmse_cm_per_robot=ate,
         **{k: live.get(k) for k in LIVE_KEYS},
         **identity,
     )

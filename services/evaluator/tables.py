@@ -21,8 +21,8 @@ TABLE1_METHODS = ("standalone", "space")
 TABLE2_METHODS = ("nearest", "utility", "rrt", "space")
 TABLE1_METRICS = {
     "coverage_3d_pct": "3D coverage (%)", "bounding_volume_pct": "bounding volume (%)",
-    "rmse_3d_cm": "3D RMSE (cm)", "overlap_3d_pct": "3D overlap (%)",
-    "coverage_2d_pct": "2D coverage (%)",
+    "rmse_3d_cm": "3D RMSE (cm)", "ate_rmse_cm": "ATE (cm)",
+    "overlap_3d_pct": "3D overlap (%)", "coverage_2d_pct": "2D coverage (%)",
 }
 TABLE2_METRICS = {
     "mapping_time_s": "mapping time (s)", "t90_s": "T90 3D (s)", "total_distance_m":

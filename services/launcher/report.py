@@ -100,6 +100,8 @@ def write_plots(
 
 
 def _fmt(value: Any) -> str:
+    if isinstance(value, list):  # per-robot figures (ate_rmse_cm_per_robot)
+        return ", ".join(_fmt(v) for v in value)
     return f"{value:.3f}" if isinstance(value, float) else str(value)
 
 
