@@ -32,15 +32,14 @@ from services.common.geometry import (  # noqa: E402
     xyyaw_from_T,
 )
 from services.evaluator.evaluate import RunConfig, probe_for  # noqa: E402
-from services.robot_agent.agent import loop_params, registration_params  # noqa: E402
 from services.robot_agent.back_end import BackEnd, submap_points  # noqa: E402
 from services.robot_agent.config import AgentConfig  # noqa: E402
 from services.robot_agent.local_map import KeyframeMapper  # noqa: E402
 from services.robot_agent.localization import Localizer  # noqa: E402
+from services.robot_agent.params import loop_params, registration_params  # noqa: E402
 from services.robot_agent.projection import cam_to_base, depth_to_points  # noqa: E402
 from services.simulator.core import odometry_noise  # noqa: E402
 from services.simulator.odometry import WheelOdometry  # noqa: E402
-
 
 REBUILD = True
 

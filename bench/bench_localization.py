@@ -34,9 +34,9 @@ from services.common import voxels  # noqa: E402
 from services.common.geometry import T_from_xyyaw, transform_points, xyyaw_from_T  # noqa: E402
 from services.evaluator import run_files as rf  # noqa: E402
 from services.evaluator.evaluate import RunConfig, probe_for  # noqa: E402
-from services.robot_agent.agent import registration_params  # noqa: E402
 from services.robot_agent.config import AgentConfig  # noqa: E402
 from services.robot_agent.localization import Localizer  # noqa: E402
+from services.robot_agent.params import registration_params  # noqa: E402
 from services.robot_agent.projection import cam_to_base, depth_to_points  # noqa: E402
 from services.simulator.core import Simulation, odometry_noise  # noqa: E402
 from services.simulator.odometry import WheelOdometry  # noqa: E402

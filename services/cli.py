@@ -10,7 +10,7 @@ from typing import Annotated, Any
 
 import typer
 
-from services.common.config import SpacemapConfig, load_config
+from services.config import SpacemapConfig, load_config
 
 app = typer.Typer(add_completion=False, no_args_is_help=False, help=__doc__)
 

@@ -16,7 +16,7 @@ import yaml
 from pydantic import BaseModel
 
 from services.cli import app
-from services.common.config import ENV_PREFIX, SpacemapConfig, load_config
+from services.config import ENV_PREFIX, SpacemapConfig, load_config
 from tests.conftest import REPO
 
 COMPOSE = yaml.safe_load((REPO / "docker-compose.yml").read_text())

@@ -6,8 +6,8 @@ import numpy as np
 from gtsam import Pose3
 
 from services.common.geometry import T_from_xyyaw, invert, transform_points
-from services.edge_server.merger import MapMerger, pose_change
 from services.common.pose_graph import Between, Prior, info_diag, left_to_right_info, optimize
+from services.edge_server.merger import MapMerger, pose_change
 from services.edge_server.submap_store import SubmapStore
 from tests.test_edge_map import make_submap
 

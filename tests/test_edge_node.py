@@ -16,7 +16,7 @@ from schemas.messages import (
     OccupancyGrid,
 )
 from services.common.bus import Inbound, Presence
-from services.common.config import SpacemapConfig
+from services.config import SpacemapConfig
 from services.edge_server.node import EdgeNode
 from tests.test_edge_planning import corridor_planner, pose
 

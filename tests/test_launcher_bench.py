@@ -11,7 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 from services.cli import app
-from services.common.config import load_config
+from services.config import load_config
 from services.evaluator.evaluate import evaluate_run_folder
 from services.evaluator.metrics import METRICS_KEYS
 from services.evaluator.scoring import LIVE_KEYS

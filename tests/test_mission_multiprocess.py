@@ -14,7 +14,7 @@ import open3d as o3d
 import pytest
 
 from services.common.bus import connect
-from services.common.config import load_config, write_config
+from services.config import load_config, write_config
 from services.launcher.monitor import Monitor
 from services.launcher.run import start_services
 from services.processes import ProcessGroup, free_tcp_port, spacemap_command

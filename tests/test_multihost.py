@@ -16,8 +16,8 @@ from typing import Any
 
 import pytest
 
-from services.common.config import load_config, write_config
 from services.common.inventory import missing_submaps
+from services.config import load_config, write_config
 from services.processes import ProcessGroup, spacemap_command
 from tests.conftest import REPO, processes_tagged
 from tests.netns import Hosts, make_hosts, netns_available

@@ -17,8 +17,8 @@ import pytest
 
 from schemas.messages import Clock, CmdVel, GtPose, Odometry
 from services.common.bus import Bus, BusConfig, Inbound, connect
-from services.common.config import SpacemapConfig
 from services.common.router import run_router
+from services.config import SpacemapConfig
 from services.simulator import node
 
 

@@ -29,9 +29,9 @@ from schemas.messages import (
     Submap,
 )
 from services.common.bus import Bus, Inbound, Presence, connect
-from services.common.config import SpacemapConfig
 from services.common.inventory import inventory_of
 from services.common.signals import stop_on_signals
+from services.config import SpacemapConfig
 from services.edge_server.planner import EdgePlanner, PlanOutput
 
 log = logging.getLogger(__name__)

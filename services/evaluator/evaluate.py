@@ -11,7 +11,7 @@ import numpy as np
 import yaml
 
 from schemas import messages as m
-from services.common.config import SpacemapConfig
+from services.config import SpacemapConfig
 from services.evaluator import run_files as rf
 from services.evaluator.scoring import Probe, score
 from services.evaluator.world_truth import eval_config_for, world_ground_truth

@@ -13,7 +13,7 @@ import numpy as np
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from services.common.config import SpacemapConfig
+from services.config import SpacemapConfig
 from services.evaluator import run_files as rf
 from services.evaluator import tables as tb
 from services.evaluator.plots import plot_methods_coverage

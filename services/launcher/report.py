@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from schemas import messages as m
-from services.common.config import SpacemapConfig
+from services.config import SpacemapConfig
 from services.evaluator import run_files as rf
 from services.evaluator.evaluate import evaluate_run_folder, load_tracks
 from services.evaluator.plots import plot_coverage, plot_map_top

@@ -12,7 +12,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from services.common.bus import connect
-from services.common.config import SpacemapConfig, write_config
+from services.config import SpacemapConfig, write_config
 from services.evaluator.evaluate import probe_for
 from services.launcher.monitor import Monitor
 from services.launcher.report import write_run_folder

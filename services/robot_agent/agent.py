@@ -39,13 +39,13 @@ from services.common.inventory import inventory_of
 from services.robot_agent.awareness import in_view_partial, visible_paper
 from services.robot_agent.back_end import BackEnd
 from services.robot_agent.config import AgentConfig
-from services.robot_agent.drf import DrfParams, filter_mask
+from services.robot_agent.drf import filter_mask
 from services.robot_agent.exploration import local_frontier_goal
-from services.robot_agent.keyframe_graph import LoopParams
 from services.robot_agent.local_grid import LocalGrid, floor_rays
 from services.robot_agent.local_map import KeyframeMapper, SubmapDelta
-from services.robot_agent.localization import Localizer, RegistrationParams
+from services.robot_agent.localization import Localizer
 from services.robot_agent.navigation import Command, Navigator, StatusEvent, inflation_cells
+from services.robot_agent.params import drf_params, loop_params, registration_params
 from services.robot_agent.projection import cam_to_base, depth_to_points, pixel_colors
 from services.robot_agent.teammates import predict_xy
 
@@ -81,28 +81,6 @@ def _xy_in(T_to_from: np.ndarray, xy_from: np.ndarray) -> np.ndarray:
 def hfov_of(K: np.ndarray, width: int) -> float:
     """Horizontal field of view of a pinhole camera, rad."""
     return 2.0 * math.atan2(width / 2.0, K[0, 0])
-
-
-def registration_params(cfg: AgentConfig) -> RegistrationParams:
-    return RegistrationParams(
-        step_m=cfg.reg_step_m, step_per_m=cfg.reg_step_per_m, step_rad=cfg.reg_step_rad,
-        min_inlier_frac=cfg.reg_min_inlier_frac, map_horizon=cfg.reg_map_horizon,
-        map_voxel_m=cfg.reg_map_voxel_m, degenerate_ratio=cfg.reg_degenerate_ratio,
-        max_removed_frac=cfg.reg_max_removed_frac,
-    )
-
-
-def loop_params(cfg: AgentConfig) -> LoopParams:
-    return LoopParams(search_radius_m=cfg.loop_search_radius_m,
-                      max_candidates=cfg.loop_max_candidates)
-
-
-def drf_params(cfg: AgentConfig) -> DrfParams:
-    return DrfParams(
-        c=cfg.drf_c, radius_m=cfg.robot_size_m, robot_top_m=cfg.robot_top_m,
-        floor_z_m=0.012, eps_m=cfg.drf_eps_m, min_points=cfg.drf_min_points,
-        voxel_m=cfg.drf_voxel_m, margin_m=cfg.drf_margin_m,
-    )
 
 
 class AgentCore:

@@ -162,7 +162,7 @@ class KeyframeGraph:
             self.rejected += 1
             return {}
         self.closures.append(closure)
-        return self._solve()
+        return self.solve()
 
     def _candidates(self, kf: Keyframe) -> list[Keyframe]:
         p = self.params
@@ -203,7 +203,7 @@ class KeyframeGraph:
             return None
         return LoopClosure(a.kf_id, b.kf_id, T_a_b, result.info)
 
-    def _solve(self) -> dict[int, np.ndarray]:
+    def solve(self) -> dict[int, np.ndarray]:
         edges = self.odometry + [Between(c.a, c.b, c.T_a_b, c.info, robust=True)
                                  for c in self.closures]
         initial = {k: kf.T_loc_kf for k, kf in self.keyframes.items()}

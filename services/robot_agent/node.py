@@ -16,8 +16,8 @@ from schemas.messages import (
     RobotPose,
 )
 from services.common.bus import Bus, Inbound, Presence, connect
-from services.common.config import SpacemapConfig
 from services.common.signals import stop_on_signals
+from services.config import SpacemapConfig
 from services.robot_agent.agent import AgentCore
 
 log = logging.getLogger(__name__)

@@ -31,7 +31,7 @@ from schemas.messages import (  # noqa: E402
     RgbdFrame,
 )
 from services.common.bus import Bus, Inbound, Presence, connect  # noqa: E402
-from services.common.config import SpacemapConfig  # noqa: E402
+from services.config import SpacemapConfig  # noqa: E402
 from services.simulator.config import SimConfig  # noqa: E402
 from services.simulator.core import Simulation  # noqa: E402
 

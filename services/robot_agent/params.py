@@ -1,0 +1,30 @@
+"""The algorithm parameter sets of the agent's modules, built from its config section."""
+
+from __future__ import annotations
+
+from services.robot_agent.config import AgentConfig
+from services.robot_agent.drf import DrfParams
+from services.robot_agent.keyframe_graph import LoopParams
+from services.robot_agent.localization import RegistrationParams
+
+
+def registration_params(cfg: AgentConfig) -> RegistrationParams:
+    return RegistrationParams(
+        step_m=cfg.reg_step_m, step_per_m=cfg.reg_step_per_m, step_rad=cfg.reg_step_rad,
+        min_inlier_frac=cfg.reg_min_inlier_frac, map_horizon=cfg.reg_map_horizon,
+        map_voxel_m=cfg.reg_map_voxel_m, degenerate_ratio=cfg.reg_degenerate_ratio,
+        max_removed_frac=cfg.reg_max_removed_frac,
+    )
+
+
+def loop_params(cfg: AgentConfig) -> LoopParams:
+    return LoopParams(search_radius_m=cfg.loop_search_radius_m,
+                      max_candidates=cfg.loop_max_candidates)
+
+
+def drf_params(cfg: AgentConfig) -> DrfParams:
+    return DrfParams(
+        c=cfg.drf_c, radius_m=cfg.robot_size_m, robot_top_m=cfg.robot_top_m,
+        floor_z_m=0.012, eps_m=cfg.drf_eps_m, min_points=cfg.drf_min_points,
+        voxel_m=cfg.drf_voxel_m, margin_m=cfg.drf_margin_m,
+    )
