@@ -32,7 +32,7 @@ from services.common.geometry import (  # noqa: E402
     xyyaw_from_T,
 )
 from services.evaluator.evaluate import RunConfig, probe_for  # noqa: E402
-from services.robot_agent.back_end import BackEnd, submap_points  # noqa: E402
+from services.robot_agent.back_end import BackEnd  # noqa: E402
 from services.robot_agent.config import AgentConfig  # noqa: E402
 from services.robot_agent.local_map import KeyframeMapper  # noqa: E402
 from services.robot_agent.localization import Localizer  # noqa: E402
@@ -40,8 +40,6 @@ from services.robot_agent.params import loop_params, registration_params  # noqa
 from services.robot_agent.projection import cam_to_base, depth_to_points  # noqa: E402
 from services.simulator.core import odometry_noise  # noqa: E402
 from services.simulator.odometry import WheelOdometry  # noqa: E402
-
-REBUILD = True
 
 
 def replay(rec, robot: int, cfg: AgentConfig, sim_cfg, loop: dict, back_end_on: bool):
@@ -54,9 +52,7 @@ def replay(rec, robot: int, cfg: AgentConfig, sim_cfg, loop: dict, back_end_on: 
     params = dataclasses.replace(
         base, registration=dataclasses.replace(base.registration, **reg),
         **{k: v for k, v in loop.items() if not k.startswith("reg.")})
-    be = BackEnd(params, cfg.voxel_m, robot) if back_end_on else None
-    if be is not None:
-        be.rebuild = REBUILD
+    be = BackEnd(params, robot) if back_end_on else None
     frame_of = {int(k): f for f, k in enumerate(rec.frame_ticks)}
     truth: dict[int, np.ndarray] = {}
     for t, k in enumerate(rec.ticks):
@@ -76,7 +72,7 @@ def replay(rec, robot: int, cfg: AgentConfig, sim_cfg, loop: dict, back_end_on: 
             sub = mapper.start_keyframe(T_loc_base, int(k))
             truth[sub.submap_id] = T_from_xyyaw(*true)
             if be is not None:
-                T_loc_base = be.on_keyframe(closed, sub, mapper, loc) @ T_loc_base
+                be.on_keyframe(closed, sub, mapper)
         T_sub_base = invert(mapper.current.T_odom_submap) @ T_loc_base
         mapper.integrate(transform_points(T_sub_base, points_base),
                          np.zeros((len(points_base), 3)), np.empty((0, 2)))
@@ -87,13 +83,13 @@ def pose_errors(mapper: KeyframeMapper, truth: dict[int, np.ndarray]) -> np.ndar
     """(K, 2) keyframe position error m and yaw error deg at the final poses."""
     out = []
     for sub in mapper.submaps():
-        dx, dy, dyaw = xyyaw_from_T(invert(truth[sub.submap_id]) @ sub.T_odom_submap)
+        dx, dy, dyaw = xyyaw_from_T(invert(truth[sub.submap_id]) @ sub.pose())
         out.append((np.hypot(dx, dy), abs(np.degrees(dyaw))))
     return np.array(out)
 
 
 def team_map(mapper: KeyframeMapper, voxel_m: float) -> np.ndarray:
-    pts = [transform_points(sub.T_odom_submap, submap_points(sub, voxel_m))
+    pts = [transform_points(sub.pose(), voxels.centres(voxels.unpack(sub.keys), voxel_m))
            for sub in mapper.submaps() if len(sub)]
     return voxels.downsample(np.concatenate(pts), 0.05)[1]
 
@@ -115,10 +111,7 @@ def main() -> None:
     ap.add_argument("--set", nargs="*", default=[], help="AgentConfig overrides, key=value")
     ap.add_argument("--robots", type=int, nargs="*")
     ap.add_argument("--only-on", action="store_true", help="skip the back-end-off replay")
-    ap.add_argument("--no-rebuild", action="store_true")
     args = ap.parse_args()
-    global REBUILD
-    REBUILD = not args.no_rebuild
     logging.basicConfig(level=logging.WARNING)
     loop = {k: yaml.safe_load(v) for k, v in (s.split("=", 1) for s in args.loop)}
     cfg = AgentConfig(**{k: yaml.safe_load(v) for k, v in (s.split("=", 1) for s in args.set)})

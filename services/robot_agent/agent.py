@@ -101,7 +101,7 @@ class AgentCore:
         self.edge_grid: OccupancyGrid | None = None
         self.mapper = KeyframeMapper(config)
         self.localizer = Localizer(registration_params(config))
-        self.back_end = BackEnd(loop_params(config), config.voxel_m, robot_id) \
+        self.back_end = BackEnd(loop_params(config), robot_id) \
             if config.loop_closure and config.registration else None
         self.n_frames = 0
         self.nav = Navigator(config, tick_s)
@@ -196,7 +196,7 @@ class AgentCore:
                          self.robot_id, odom.tick, self.frames_skipped)
             cam, points_base = self._filtered_points(frame, T_loc_base, odom.tick)
             T_loc_base = self._register(points_base, T_odom_base, self._drf_removed_frac(frame))
-        T_world_base = self.T_world_loc @ T_loc_base
+        T_world_base = self._T_world_front() @ T_loc_base
         pose_world = xyyaw_from_T(T_world_base)
         self._ensure_grid(pose_world)
         if frame is not None:
@@ -209,6 +209,12 @@ class AgentCore:
         cmd = self._yield_to_teammates(pose_world, cmd, odom.tick)
         events += [event] if event is not None else []
         return self._outputs(odom, pose_world, deltas, events, cmd)
+
+    def _T_world_front(self) -> np.ndarray:
+        """World pose of the front end's frame: the edge's correction and the back end's."""
+        if self.back_end is None:
+            return self.T_world_loc
+        return self.T_world_loc @ self.back_end.T_map_front()
 
     def _yield_to_teammates(self, pose_world: tuple[float, float, float], cmd: Command,
                             tick: int) -> Command:
@@ -293,7 +299,7 @@ class AgentCore:
         """Camera points of the frame after the DRF, and the same points in the base frame."""
         depth = frame.depth_m
         if self.config.drf:
-            pose_world = xyyaw_from_T(self.T_world_loc @ T_loc_base)  # pre-registration guess
+            pose_world = xyyaw_from_T(self._T_world_front() @ T_loc_base)  # pre-registration
             targets = self._teammates_in_view(pose_world, frame, tick)
             mask = np.zeros(depth.shape, bool)
             if targets.shape[0]:
@@ -333,9 +339,7 @@ class AgentCore:
             closed = self.mapper.current
             sub = self.mapper.start_keyframe(T_loc_base, tick)
             if self.back_end is not None:
-                T_new_old = self.back_end.on_keyframe(closed, sub, self.mapper, self.localizer)
-                T_loc_base = T_new_old @ T_loc_base
-                T_world_base = self.T_world_loc @ T_loc_base
+                self.back_end.on_keyframe(closed, sub, self.mapper)
                 out += self.mapper.take_pose_updates()
         free_base = floor_rays(
             points_base, frame.T_base_cam[:2, 3], cfg.obstacle_z_min_m, cfg.obstacle_z_max_m,

@@ -39,8 +39,8 @@ log = logging.getLogger(__name__)
 class LoopParams:
     search_radius_m: float = 3.0  # candidate keyframes start within this of the closing one
     min_gap: int = 2  # ... and are at least this many keyframes older
-    min_driven_m: float = 0.0  # ... and this much path older (the front end links neighbours)
-    max_candidates: int = 8  # older keyframes that make the map it is registered to
+    min_driven_m: float = 3.0  # ... and this much path older (the front end links neighbours)
+    max_candidates: int = 1  # older keyframes that make the map it is registered to
     min_overlap_m3: float = 0.3
     min_points: int = 300  # voxels above the floor a keyframe needs to take part
     floor_z_m: float = 0.03
@@ -58,18 +58,26 @@ class LoopParams:
     odom_sigma_rad: float = 0.002
     odom_sigma_rad_per_m: float = 0.005
     odom_sigma_rad_per_rad: float = 0.01
+    # a closure enters the graph only with a consistent partner among the closures of the
+    # last `confirm_window` closing keyframes (one closure alone cannot be judged)
+    confirm_window: int = 4
+    consistent_m: float = 0.03
+    consistent_m_per_m: float = 0.01
+    consistent_rad: float = 0.01
+    consistent_rad_per_m: float = 0.003
     correction_tol_m: float = 0.003
     correction_tol_rad: float = 0.001
     registration: RegistrationParams = field(default_factory=lambda: RegistrationParams(
-        downsample_m=0.15, max_corr_m=0.5, fine_downsample_m=0.08, fine_corr_m=0.12,
+        downsample_m=0.15, max_corr_m=0.5, fine_downsample_m=0.05, fine_corr_m=0.08,
         max_iterations=30, min_inlier_frac=0.6, max_shift_m=0.6, max_turn_rad=0.2,
-        sigma_m=0.01))
+        sigma_m=0.03))
 
 
 @dataclass
 class Keyframe:
     kf_id: int
     T_loc_kf: np.ndarray  # (4, 4) current estimate
+    T_front: np.ndarray  # (4, 4) the front end's pose of it (fixed: the odometry measurement)
     distance_m: float  # front-end path length from the first keyframe to this one
     T_reported: np.ndarray  # (4, 4) the pose last given out by `close()` (or the first)
     points: np.ndarray | None = None  # (N, 3) points above the floor, own frame, once closed
@@ -116,20 +124,23 @@ class KeyframeGraph:
         self.order: list[int] = []
         self.priors: list[Prior] = []
         self.odometry: list[Between] = []
-        self.closures: list[LoopClosure] = []
+        self.closures: list[LoopClosure] = []  # confirmed: in the graph
+        self.pending: list[LoopClosure] = []  # verified, waiting for a consistent partner
         self.tried = 0
         self.rejected = 0  # by GICP or the drift gate
         self.dropped = 0  # by the robust back end
 
-    def add_keyframe(self, kf_id: int, T_loc_kf: np.ndarray) -> None:
-        """A new keyframe at the front end's pose, chained to the previous one."""
-        T = _planar(T_loc_kf)
+    def add_keyframe(self, kf_id: int, T_front_kf: np.ndarray) -> None:
+        """A new keyframe at the front end's pose, chained to the previous one by the front
+        end's relative motion (the front end itself is never re-anchored, so that motion is
+        always in one consistent frame)."""
+        T = _planar(T_front_kf)
         if not self.order:
             self.priors.append(Prior(kf_id, T, info_diag([1e-4] * 3, [1e-4] * 3)))
-            self.keyframes[kf_id] = Keyframe(kf_id, T, 0.0, T.copy())
+            self.keyframes[kf_id] = Keyframe(kf_id, T, T.copy(), 0.0, T.copy())
         else:
             prev = self.keyframes[self.order[-1]]
-            T_prev_kf = invert(prev.T_reported) @ T  # the front end's frame is the reported one
+            T_prev_kf = invert(prev.T_front) @ T
             dx, dy, dyaw = xyyaw_from_T(T_prev_kf)
             d, turn = float(np.hypot(dx, dy)), abs(float(wrap_angle(dyaw)))
             p = self.params
@@ -137,7 +148,8 @@ class KeyframeGraph:
                 p.odom_sigma_m + p.odom_sigma_m_per_m * d,
                 p.odom_sigma_rad + p.odom_sigma_rad_per_m * d + p.odom_sigma_rad_per_rad * turn)
             self.odometry.append(Between(prev.kf_id, kf_id, T_prev_kf, info, robust=False))
-            self.keyframes[kf_id] = Keyframe(kf_id, T, prev.distance_m + d, T.copy())
+            T_est = _planar(prev.T_loc_kf @ T_prev_kf)
+            self.keyframes[kf_id] = Keyframe(kf_id, T_est, T, prev.distance_m + d, T_est.copy())
         self.order.append(kf_id)
 
     def close(self, kf_id: int, points_kf: np.ndarray) -> dict[int, np.ndarray]:
@@ -161,8 +173,35 @@ class KeyframeGraph:
         if closure is None:
             self.rejected += 1
             return {}
+        partners = [c for c in self.closures[-self.params.confirm_window:] + self.pending
+                    if c.b != closure.b and self._consistent(c, closure)]
+        if not partners:
+            self.pending = (self.pending + [closure])[-self.params.confirm_window:]
+            return {}
+        for c in partners:
+            if c in self.pending:
+                self.pending.remove(c)
+                self.closures.append(c)
         self.closures.append(closure)
         return self.solve()
+
+    def _implied(self, c: LoopClosure) -> np.ndarray:
+        """The correction closure c asks of its closing keyframe: T_b_b' at the estimates."""
+        return invert(self.keyframes[c.b].T_loc_kf) @ self.keyframes[c.a].T_loc_kf @ c.T_a_b
+
+    def _consistent(self, c1: LoopClosure, c2: LoopClosure) -> bool:
+        """Pairwise consistency (PCM's test on two closures): both must move their closing
+        keyframes alike, since the front end's motion between those is nearly exact. A false
+        closure (a wrong basin) asks for a correction no other closure agrees with."""
+        p = self.params
+        b1, b2 = self.keyframes[c1.b], self.keyframes[c2.b]
+        T_12 = invert(b1.T_loc_kf) @ b2.T_loc_kf
+        D = invert(T_12) @ invert(self._implied(c1)) @ T_12 @ self._implied(c2)
+        dx, dy, dyaw = xyyaw_from_T(D)
+        driven = abs(b2.distance_m - b1.distance_m)
+        return bool(np.hypot(dx, dy) <= p.consistent_m + p.consistent_m_per_m * driven
+                    and abs(wrap_angle(dyaw)) <= p.consistent_rad
+                    + p.consistent_rad_per_m * driven)
 
     def _candidates(self, kf: Keyframe) -> list[Keyframe]:
         p = self.params
@@ -220,6 +259,15 @@ class KeyframeGraph:
                 changed[k] = kf.T_reported
         return changed
 
+    def T_map_front(self) -> np.ndarray:
+        """The correction of the front end's frame at the newest keyframe: T_loc_base of the
+        robot now = T_map_front · (the front end's T_loc_base)."""
+        if not self.order:
+            return np.eye(4)
+        kf = self.keyframes[self.order[-1]]
+        return kf.T_loc_kf @ invert(kf.T_front)
+
     def stats(self) -> dict[str, int]:
         return {"keyframes": len(self.order), "closures": len(self.closures),
+                "pending": len(self.pending),
                 "tried": self.tried, "rejected": self.rejected, "dropped": self.dropped}

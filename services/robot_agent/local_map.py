@@ -51,6 +51,7 @@ class VoxelSubmap:
         self.start_tick = start_tick
         self.keys = np.empty(0, np.int64)  # sorted packed voxel indices
         self.color_sum = np.empty((0, 3), np.float64)
+        self.point_sum = np.empty((0, 3), np.float64)  # for voxel means (not lattice centres)
         self.counts = np.empty(0, np.int64)
         self.sent_counts = np.empty(0, np.int64)  # 0 = never sent
         self.sent_colors = np.empty((0, 3), np.int64)
@@ -58,6 +59,7 @@ class VoxelSubmap:
         self.free_done = np.empty((2, 0), np.int64)  # replaces free_seen once finished
         self.pending_free: list[np.ndarray] = []  # (2, M) int64 (x, y) cell batches
         self.pose_dirty = False  # the back end moved it: the next delta carries the new pose
+        self.T_corrected: np.ndarray | None = None  # the back end's pose, once it moved it
 
     def __len__(self) -> int:
         return int(self.keys.size)
@@ -72,12 +74,15 @@ class VoxelSubmap:
         col_sum = np.stack(
             [np.bincount(inverse, weights=colors[:, d], minlength=uniq.size) for d in range(3)], 1
         )
+        pt_sum = np.stack([np.bincount(inverse, weights=points_submap[:, d], minlength=uniq.size)
+                           for d in range(3)], 1)
         merged = unique_sorted(np.concatenate([self.keys, uniq]))  # np.union1d is slow
         if merged.size != self.keys.size:
             self._grow(merged)
         idx = np.searchsorted(self.keys, uniq)
         self.counts[idx] += counts
         self.color_sum[idx] += col_sum
+        self.point_sum[idx] += pt_sum
 
     def _grow(self, merged: np.ndarray) -> None:
         old = np.searchsorted(merged, self.keys)
@@ -89,6 +94,7 @@ class VoxelSubmap:
             return out
 
         self.color_sum, self.counts = spread(self.color_sum), spread(self.counts)
+        self.point_sum = spread(self.point_sum)
         self.sent_counts, self.sent_colors = spread(self.sent_counts), spread(self.sent_colors)
         self.keys = merged
 
@@ -103,6 +109,16 @@ class VoxelSubmap:
             new = np.stack(np.divmod(flat, 2 * _FREE_HALF))
             self.free_seen[new[0], new[1]] = True
             self.pending_free.append(new - _FREE_HALF)
+
+    def pose(self) -> np.ndarray:
+        """The pose published: the back end's when it moved the submap, else the front
+        end's (`T_odom_submap`, which frames integrate against and never changes)."""
+        return self.T_odom_submap if self.T_corrected is None else self.T_corrected
+
+    def mean_points(self) -> np.ndarray:
+        """(N, 3) mean of the points in each voxel, submap frame: on a surface, unlike the
+        voxel centres, which stair-step it by up to half a voxel."""
+        return self.point_sum / np.maximum(self.counts, 1)[:, None]
 
     def mean_colors(self) -> np.ndarray:
         return np.round(self.color_sum / np.maximum(self.counts, 1)[:, None]).astype(np.int64)
@@ -143,7 +159,7 @@ class VoxelSubmap:
         self.pending_free = []
         return SubmapDelta(
             submap_id=self.submap_id,
-            T_odom_submap=self.T_odom_submap.copy(),
+            T_odom_submap=self.pose().copy(),
             points_mm=np.round(centres * 1000.0).astype(np.int16).T.copy(),
             colors=colors[dirty].astype(np.uint8),
             counts=np.minimum(self.counts[dirty], np.iinfo(np.uint16).max).astype(np.uint16),
@@ -201,17 +217,17 @@ class KeyframeMapper:
         return [*self.done, *([self.current] if self.current is not None else [])]
 
     def pose_of(self, submap_id: int) -> np.ndarray | None:
-        """T_loc_submap of a submap this agent made (None for an unknown id)."""
+        """Published T_loc_submap of a submap this agent made (None for an unknown id)."""
         for sub in reversed(self.submaps()):
             if sub.submap_id == submap_id:
-                return sub.T_odom_submap
+                return sub.pose()
         return None
 
     def set_poses(self, poses: dict[int, np.ndarray]) -> None:
         """Move submaps (their voxels stay in their own frame) and queue the new poses."""
         for sub in self.submaps():
             if sub.submap_id in poses:
-                sub.T_odom_submap = np.asarray(poses[sub.submap_id], np.float64).copy()
+                sub.T_corrected = np.asarray(poses[sub.submap_id], np.float64).copy()
                 sub.pose_dirty = True
 
     def take_pose_updates(self) -> list[SubmapDelta]:

@@ -71,28 +71,14 @@ class FrameRegistrar:
         self.T_odom_accepted: np.ndarray | None = None  # odometry at the last accepted one
         self.n_accepted = 0
 
-    def rebuild(self, clouds: list[tuple[np.ndarray, np.ndarray]]) -> None:
-        """A new map from (points (N, 3) in a keyframe frame, T_loc_kf) pairs: after the back
-        end moved keyframes, the old map would hold every corrected place twice."""
-        self.voxelmap = small_gicp.GaussianVoxelMap(self.params.map_voxel_m)
-        self.voxelmap.set_lru(self.params.map_horizon, 10)
-        for points_kf, T_loc_kf in clouds:
-            cloud = self._cloud(points_kf, downsample=False)
-            if cloud is not None:
-                self.voxelmap.insert(cloud, T_loc_kf)
-
-    def _cloud(self, points_base: np.ndarray, downsample: bool = True
-               ) -> small_gicp.PointCloud | None:
+    def _cloud(self, points_base: np.ndarray) -> small_gicp.PointCloud | None:
         pts = points_base[points_base[:, 2] > self.params.floor_z_m]
         if pts.shape[0] < self.params.min_points:
             return None
-        pts = np.ascontiguousarray(pts, dtype=np.float64)
-        if downsample:
-            cloud, _ = small_gicp.preprocess_points(
-                pts, self.params.downsample_m, num_neighbors=10, num_threads=1)
-        else:  # already a voxel map: covariances only
-            cloud = small_gicp.PointCloud(pts)
-            small_gicp.estimate_covariances(cloud, num_neighbors=10, num_threads=1)
+        cloud, _ = small_gicp.preprocess_points(
+            np.ascontiguousarray(pts, dtype=np.float64), self.params.downsample_m,
+            num_neighbors=10, num_threads=1,
+        )
         return cloud if cloud.size() >= self.params.min_points else None
 
     def gate(self, T_odom_base: np.ndarray) -> tuple[float, float]:
@@ -176,10 +162,6 @@ class Localizer:
         self.registrar = FrameRegistrar(params)
         self.T_loc_odom = np.eye(4)
         self.outcomes: Counter[str] = Counter()  # "accepted" or the rejection reason
-
-    def correct(self, T_new_old: np.ndarray) -> None:
-        """The back end moved the open keyframe by T_new_old: the robot moves with it."""
-        self.T_loc_odom = planar(T_new_old @ self.T_loc_odom)
 
     def guess(self, T_odom_base: np.ndarray) -> np.ndarray:
         return self.T_loc_odom @ T_odom_base
