@@ -1,9 +1,11 @@
 """Simulator benchmark (SPEC §8): RGB-D frame time, real-time factor alone, ground-truth build.
 
-Run: .venv/bin/python bench/bench_sim.py [--ticks 300] [--skip-gt]
-Prints a markdown table of medians. The real-time factor is the simulator alone: physics plus
-rendering every robot's camera at the default camera rate, no bus. The ground-truth time is
-the evaluator's build from scratch (empty cache directory) and the later cached load.
+Run: .venv/bin/python bench/bench_sim.py [--ticks 300] [--skip-gt] [--sensor-model-only]
+Prints a markdown table of medians. Frames use the default (realistic) sensors; the sensor
+model's own cost (invalid-return mask, then mask + noise) is timed on rendered frames. The
+real-time factor is the simulator alone: physics plus rendering every robot's camera at the
+default camera rate, no bus. The ground-truth time is the evaluator's build from scratch
+(empty cache directory) and the later cached load.
 """
 
 from __future__ import annotations
@@ -24,6 +26,11 @@ import services.simulator  # noqa: E402, F401  (picks the GL backend before MuJo
 from services.evaluator.world_truth import world_ground_truth  # noqa: E402
 from services.simulator.config import SimConfig  # noqa: E402
 from services.simulator.core import Simulation  # noqa: E402
+from services.simulator.sensor_model import (  # noqa: E402
+    PRESETS,
+    apply_depth_model,
+    invalid_return_mask,
+)
 
 AWS_HOUSE = Path(__file__).resolve().parents[2] / "shared/worlds/aws_small_house/small_house.xml"
 
@@ -49,6 +56,26 @@ def frame_ms(world: str, width: int, height: int, backend: str, segmentation: bo
         times.append(time.perf_counter() - t0)
     sim.close()
     return 1e3 * statistics.median(times)
+
+
+def sensor_model_ms(world: str, width: int, height: int) -> tuple[float, float]:
+    """(invalid-return mask, whole realistic depth model) ms per frame, over 30 views."""
+    sim = Simulation(SimConfig(world=world, robots=3, width=width, height=height,
+                               sensors="ideal", render_backend="gl"))
+    rng, model = np.random.default_rng(0), PRESETS["realistic"]
+    mask_s, model_s = [], []
+    for k in range(30):
+        sim.step({0: (0.2, 0.3), 1: (0.3, -0.2), 2: (0.1, 0.5)})
+        depth = sim.render(k % 3).depth_m
+        for _ in range(10):
+            t0 = time.perf_counter()
+            invalid_return_mask(depth, sim.K, model.max_incidence_deg, model.edge_rel_jump)
+            t1 = time.perf_counter()
+            apply_depth_model(depth, sim.K, model, sim.cfg.range_m, rng)
+            mask_s.append(t1 - t0)
+            model_s.append(time.perf_counter() - t1)
+    sim.close()
+    return 1e3 * statistics.median(mask_s), 1e3 * statistics.median(model_s)
 
 
 def realtime_factor(world: str, robots: int, ticks: int) -> tuple[float, float, float]:
@@ -87,11 +114,21 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--ticks", type=int, default=300)
     parser.add_argument("--skip-gt", action="store_true", help="no ground-truth build times")
+    parser.add_argument("--sensor-model-only", action="store_true",
+                        help="only the depth model's cost per frame")
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
     named = worlds()
     frame_worlds = [w for w in ("house", "AWS house") if w in named]
     lines = ["| measure | world | value |", "|---|---|---|"]
+    for label in frame_worlds:
+        for w, h in ((160, 120), (320, 240)):
+            mask_ms, model_ms = sensor_model_ms(named[label], w, h)
+            lines.append(f"| invalid-return mask {w}×{h} | {label} | {mask_ms:.2f} ms |")
+            lines.append(f"| depth model (mask + noise) {w}×{h} | {label} | {model_ms:.2f} ms |")
+    if args.sensor_model_only:
+        print("\n".join(lines))
+        return
     for label in frame_worlds:
         for backend in ("gl", "raycast"):
             for w, h in ((160, 120), (320, 240)):

@@ -158,6 +158,9 @@ def run(
     no_drf: Annotated[bool, typer.Option("--no-drf", help="standalone mapping baseline")] = False,
     resolution: Annotated[str | None, typer.Option("--resolution", help="camera WxH")] = None,
     realtime: Annotated[float | None, typer.Option("--realtime", help="real-time factor")] = None,
+    sensors: Annotated[str | None, typer.Option(
+        "--sensors", help="realistic (Kinect v2-like depth, odometry random walk; default) "
+        "or ideal (every random term off)")] = None,
     connect: ConnectOpt = None,
     spawn: Annotated[str | None, typer.Option("--spawn", help='"X,Y,YAW;X,Y,YAW;..."')] = None,
     sample_every: Annotated[float, typer.Option(
@@ -178,6 +181,7 @@ def run(
         ("sim.max_sim_time_s", sim_time),
         ("edge.planner", planner),
         ("sim.realtime", realtime),
+        ("sim.sensors", sensors),
     ):
         if value is not None:
             overrides[key] = value

@@ -1,7 +1,8 @@
 """RGB-D camera: MuJoCo offscreen GL on the CPU, or ray casting when no GL context exists.
 
 Output: RGB uint8 (H, W, 3), row 0 at the top; depth float32 z-depth in metres along the
-optical axis, 0 where there is no return or the return is beyond `range_m`. Frames: the
+optical axis, 0 where there is no return, the return is beyond `range_m` or the sensor model
+drops it (grazing incidence, depth edges: sensor_model.py), with its noise. Frames: the
 optical frame `cam` is x right, y down, z forward; MuJoCo's camera frame looks along −z with
 +y up. Segmentation (geom id per pixel) is for the evaluator only and is never published on
 agent-visible keys. A GL context is bound to the thread that created the camera.
@@ -20,6 +21,7 @@ import mujoco
 import numpy as np
 
 from services.simulator.robots import RobotIds, T_base_cammj
+from services.simulator.sensor_model import PRESETS, SensorModel, apply_depth_model
 from services.simulator.worlds import SENSED_GROUPS
 
 log = logging.getLogger(__name__)
@@ -92,13 +94,14 @@ class RgbdCamera:
         width: int,
         height: int,
         range_m: float,
-        depth_noise_per_m2: float = 0.0,
+        sensors: SensorModel = PRESETS["ideal"],
         backend: Backend = "auto",
     ) -> None:
         self.model = model
         self.width, self.height = width, height
         self.range_m = range_m
-        self.depth_noise_per_m2 = depth_noise_per_m2
+        self.sensors = sensors
+        self.K = intrinsics(width, height, self._fovy())
         prepare_for_rendering(model, width, height)
         self._gl = None
         self.backend: str = "raycast"
@@ -176,7 +179,7 @@ class RgbdCamera:
 
     # -- ray casting -------------------------------------------------------------------------
     def _init_raycast(self) -> None:
-        K = intrinsics(self.width, self.height, self._fovy())
+        K = self.K
         v, u = np.mgrid[0 : self.height, 0 : self.width].astype(np.float64)
         # Directions in MuJoCo's camera frame with z = −1: the hit distance is the z-depth.
         self._dirs_cammj = np.stack(
@@ -226,14 +229,7 @@ class RgbdCamera:
             img = self._render_raycast(data, ids)
             if not segmentation:
                 img = RgbdImage(img.rgb, img.depth_m)
-        depth = np.where((img.depth_m > 0) & (img.depth_m <= self.range_m), img.depth_m, 0)
-        if self.depth_noise_per_m2 > 0 and rng is not None:
-            # Kinect-like: standard deviation grows with the square of the depth. Only returns
-            # get noise: the far plane's ~1 km "depth" would land 3 % of the sky within range.
-            noise = rng.standard_normal(depth.shape).astype(np.float32)
-            depth = depth + noise * np.float32(self.depth_noise_per_m2) * depth * depth
-            depth = np.where((depth > 0) & (depth <= self.range_m), depth, 0)
-        depth = depth.astype(np.float32)
+        depth = apply_depth_model(img.depth_m, self.K, self.sensors, self.range_m, rng)
         return RgbdImage(img.rgb, depth, img.segmentation)
 
     def close(self) -> None:

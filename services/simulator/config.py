@@ -7,6 +7,8 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+SensorPreset = Literal["realistic", "ideal"]
+
 
 class SimConfig(BaseModel):
     """World, robots, sensors and clock."""
@@ -36,10 +38,24 @@ class SimConfig(BaseModel):
     realtime: float | None = Field(default=None, gt=0, description="None = lockstep")
     max_sim_time_s: float = Field(default=600.0, gt=0)
     wait_for_peers_s: float = Field(default=120.0, gt=0)
-    # Sensor and odometry models (spacemap additions).
-    depth_noise_per_m2: float = Field(
-        default=0.0, ge=0, description="depth noise std = this × depth², metres (0.0005 is "
-        "Kinect v2-like: ~1 mm at 1.5 m, ~1 cm at 4.5 m)"
+    # Sensor and odometry models (spacemap additions). The random terms default to None =
+    # "take the value of the preset `sensors`" (sensor_model.sensor_model resolves them), so an
+    # explicit value wins over either preset and `sensors` can still be switched afterwards.
+    sensors: SensorPreset = Field(
+        default="realistic", description="realistic = Kinect v2-like depth and drifting "
+        "odometry with random walks; ideal = every random term and invalid return off"
+    )
+    depth_noise_per_m2: float | None = Field(
+        default=None, ge=0, description="depth noise std = this × depth², metres (realistic "
+        "0.0005, Kinect v2-like: ~1 mm at 1.5 m, ~1 cm at 4.5 m; ideal 0)"
+    )
+    depth_max_incidence_deg: float | None = Field(
+        default=None, gt=0, le=90, description="no return where the angle between the ray "
+        "and the surface normal exceeds this (realistic 80; 90 = off)"
+    )
+    depth_edge_rel_jump: float | None = Field(
+        default=None, ge=0, description="no return on the far side of a depth jump larger "
+        "than this fraction of the depth between neighbour pixels (realistic 0.1; 0 = off)"
     )
     render_backend: Literal["auto", "gl", "raycast"] = Field(
         default="auto", description="auto = offscreen GL, ray casting when no GL context"
@@ -47,8 +63,9 @@ class SimConfig(BaseModel):
     odom_scale_error: float = Field(default=0.02, description="relative distance error")
     odom_yaw_scale_error: float = Field(default=0.01, description="relative turn error")
     odom_heading_bias_rad_per_m: float = Field(default=0.005, description="yaw drift per metre")
-    # With the random terms at 0 (default) a lockstep run does not depend on the seed at all.
-    odom_noise_m_per_sqrt_m: float = Field(
-        default=0.0, ge=0, description="random-walk translation noise (seeded)"
+    odom_noise_m_per_sqrt_m: float | None = Field(
+        default=None, ge=0, description="random-walk translation noise, seeded (realistic 0.01)"
     )
-    odom_noise_rad_per_sqrt_rad: float = Field(default=0.0, ge=0)
+    odom_noise_rad_per_sqrt_rad: float | None = Field(
+        default=None, ge=0, description="random-walk rotation noise, seeded (realistic 0.01)"
+    )

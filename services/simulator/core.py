@@ -7,6 +7,7 @@ odometry and images.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -23,7 +24,10 @@ from services.simulator.robots import (
     vertical_fov_deg,
     world_pose,
 )
+from services.simulator.sensor_model import sensor_model
 from services.simulator.worlds import Pose, load_world, spawn_poses
+
+log = logging.getLogger(__name__)
 
 CONTROL_PERIOD_S = 0.01  # body → world velocity conversion is refreshed this often
 
@@ -55,12 +59,13 @@ def build_model(cfg: SimConfig) -> WorldModel:
 
 
 def odometry_noise(cfg: SimConfig) -> OdometryNoise:
+    sensors = sensor_model(cfg)
     return OdometryNoise(
         scale_error=cfg.odom_scale_error,
         yaw_scale_error=cfg.odom_yaw_scale_error,
         heading_bias_rad_per_m=cfg.odom_heading_bias_rad_per_m,
-        noise_m_per_sqrt_m=cfg.odom_noise_m_per_sqrt_m,
-        noise_rad_per_sqrt_rad=cfg.odom_noise_rad_per_sqrt_rad,
+        noise_m_per_sqrt_m=sensors.odom_noise_m_per_sqrt_m,
+        noise_rad_per_sqrt_rad=sensors.odom_noise_rad_per_sqrt_rad,
     )
 
 
@@ -76,6 +81,8 @@ class Simulation:
 
     def __init__(self, cfg: SimConfig) -> None:
         self.cfg = cfg
+        self.sensors = sensor_model(cfg)
+        log.info("sensors %s: %s", cfg.sensors, self.sensors)
         world = build_model(cfg)
         self.model, self.spawns, self.robots = world.model, world.spawns, world.robots
         self.data = mujoco.MjData(self.model)
@@ -151,7 +158,7 @@ class Simulation:
         if self._camera is None:
             cfg = self.cfg
             self._camera = RgbdCamera(
-                self.model, cfg.width, cfg.height, cfg.range_m, cfg.depth_noise_per_m2,
+                self.model, cfg.width, cfg.height, cfg.range_m, self.sensors,
                 cfg.render_backend,
             )
         return self._camera
