@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 import pytest
+import yaml
 
 from services.common.bus import connect
 from services.config import load_config, write_config
@@ -67,6 +68,10 @@ def test_two_robot_mission_over_the_bus(tmp_path: Path) -> None:
     assert processes_tagged(tmp_path / "logs") == [], "processes left behind"
 
 
+def config_sensors(run_dir: Path) -> str:
+    return yaml.safe_load((run_dir / "config.yaml").read_text())["sim"]["sensors"]
+
+
 def _spacemap_run(out: Path, *args: str) -> dict:
     proc = subprocess.run(
         [sys.executable, "-m", "services", "run", "--out", str(out), *args],
@@ -87,6 +92,11 @@ def test_spacemap_run_writes_a_run_folder_and_repeats_exactly(tmp_path: Path) ->
     assert metrics["robots"] == 2 and metrics["seed"] == 1
     assert metrics["sim_time_s"] >= 19.0
     assert metrics["coverage_3d_pct"] > 5.0 and metrics["total_distance_m"] > 1.0
+    # default sensors are realistic (noisy depth with dropouts, odometry random walk): the
+    # short mission's map must still be ghost-free to SPEC §8's worst-seed bound
+    assert config_sensors(out) == "realistic"
+    assert metrics["bounding_volume_pct"] <= 0.05, metrics["bounding_volume_pct"]
+    assert metrics["ate_rmse_cm"] is not None and metrics["ate_rmse_cm"] < 5.0
     cloud = o3d.io.read_point_cloud(str(out / "merged_map.ply"))
     assert len(cloud.points) > 1000
     for name in ("grid.pgm", "grid.yaml", "config.yaml", "report.md", "timeseries.csv",

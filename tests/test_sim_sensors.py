@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from services.common.config import SpacemapConfig, load_config
+from services.config import SpacemapConfig, load_config
 from services.simulator.camera import GEOMGROUP, intrinsics
 from services.simulator.config import SimConfig
 from services.simulator.core import Simulation

@@ -111,9 +111,11 @@ class Monitor:
         return {i: int(total.get(i, 0)) for i in range(self.robots)}
 
     def trim_to_common_tick(self) -> None:
-        """Cut ground-truth tracks to the last stamp every robot reached, so a run's files do
-        not depend on which of the final tick's messages arrived before shutdown."""
-        ends = [t.gt_stamps_ns[-1] for t in self.tracks.values() if t.gt_stamps_ns]
+        """Cut both tracks of every robot to the last stamp that every robot's ground truth and
+        estimate reached (each stream arrives in order), so a run's files and its ATE do not
+        depend on which of the final tick's messages arrived before shutdown."""
+        ends = [s[-1] for t in self.tracks.values() for s in (t.gt_stamps_ns, t.est_stamps_ns)
+                if s]
         if not ends:
             return
         end = min(ends)

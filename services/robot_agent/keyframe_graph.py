@@ -28,7 +28,13 @@ from services.common.geometry import (
     xyyaw_from_T,
 )
 from services.common.pose_graph import Between, Prior, info_diag, optimize
-from services.common.registration import Prepared, RegistrationParams, prepare, register
+from services.common.registration import (
+    Prepared,
+    RegistrationParams,
+    prepare,
+    register,
+    world_box,
+)
 
 log = logging.getLogger(__name__)
 
@@ -105,14 +111,6 @@ def _planar(T: np.ndarray) -> np.ndarray:
 def _box_overlap(box_a: np.ndarray, box_b: np.ndarray) -> float:
     side = np.minimum(box_a[1], box_b[1]) - np.maximum(box_a[0], box_b[0])
     return float(np.prod(np.maximum(side, 0.0)))
-
-
-def _world_box(box: np.ndarray, T: np.ndarray) -> np.ndarray:
-    lo, hi = box
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                        for z in (lo[2], hi[2])])
-    world = corners @ T[:3, :3].T + T[:3, 3]
-    return np.stack([world.min(axis=0), world.max(axis=0)])
 
 
 class KeyframeGraph:
@@ -206,7 +204,7 @@ class KeyframeGraph:
     def _candidates(self, kf: Keyframe) -> list[Keyframe]:
         p = self.params
         idx = self.order.index(kf.kf_id)
-        box = _world_box(kf.box, kf.T_loc_kf)
+        box = world_box(kf.box, kf.T_loc_kf)
         scored = []
         for other_id in self.order[: max(idx - p.min_gap + 1, 0)]:
             other = self.keyframes[other_id]
@@ -214,7 +212,7 @@ class KeyframeGraph:
                 continue
             if np.hypot(*(other.T_loc_kf[:2, 3] - kf.T_loc_kf[:2, 3])) > p.search_radius_m:
                 continue
-            overlap = _box_overlap(box, _world_box(other.box, other.T_loc_kf))
+            overlap = _box_overlap(box, world_box(other.box, other.T_loc_kf))
             if overlap >= p.min_overlap_m3:
                 scored.append((-overlap, other_id, other))
         return [other for _, _, other in sorted(scored, key=lambda s: s[:2])][: p.max_candidates]
