@@ -110,12 +110,18 @@ class Monitor:
                     total[robot] += n
         return {i: int(total.get(i, 0)) for i in range(self.robots)}
 
-    def trim_to_common_tick(self) -> None:
+    def tracks_reach(self, stamp_ns: int) -> bool:
+        """Every robot's ground truth and estimate have arrived up to `stamp_ns`."""
+        return len(self.tracks) >= self.robots and all(
+            s and s[-1] >= stamp_ns for t in self.tracks.values()
+            for s in (t.gt_stamps_ns, t.est_stamps_ns))
+
+    def trim_to_common_tick(self, end_stamp_ns: int | None = None) -> None:
         """Cut both tracks of every robot to the last stamp that every robot's ground truth and
         estimate reached (each stream arrives in order), so a run's files and its ATE do not
         depend on which of the final tick's messages arrived before shutdown."""
         ends = [s[-1] for t in self.tracks.values() for s in (t.gt_stamps_ns, t.est_stamps_ns)
-                if s]
+                if s] + ([end_stamp_ns] if end_stamp_ns is not None else [])
         if not ends:
             return
         end = min(ends)

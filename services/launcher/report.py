@@ -30,6 +30,13 @@ SERIES_COLUMNS = [
 ]
 
 
+def mission_end_stamp_ns(config: SpacemapConfig, live: dict[str, Any]) -> int:
+    """The stamp of the mission's last tick (completion or the cap): tracks end there,
+    whatever the clock did while the launcher shut the mission down."""
+    tick_ns = round(config.sim.tick_s * 1e9)
+    return round(float(live["sim_time_s"]) / config.sim.tick_s) * tick_ns
+
+
 def write_run_folder(
     out_dir: Path, config: SpacemapConfig, monitor: Monitor, sampler: CoverageSampler,
     final_cloud: m.Cloud, live: dict[str, Any], probe: Probe,
@@ -37,7 +44,7 @@ def write_run_folder(
     """Write every artefact of a run and return metrics.json's content."""
     robots = config.sim.robots
     sampler.add(final_cloud)  # the series ends at the final map
-    monitor.trim_to_common_tick()
+    monitor.trim_to_common_tick(mission_end_stamp_ns(config, live))
     _write_maps(out_dir, monitor, final_cloud, robots, live)
     for robot, track in monitor.tracks.items():
         rf.write_tum(rf.gt_trajectory_path(out_dir, robot), track.gt_stamps_ns, track.gt_xyyaw)

@@ -15,7 +15,7 @@ from services.common.bus import connect
 from services.config import SpacemapConfig, write_config
 from services.evaluator.evaluate import probe_for
 from services.launcher.monitor import Monitor
-from services.launcher.report import write_run_folder
+from services.launcher.report import mission_end_stamp_ns, write_run_folder
 from services.launcher.sampler import CoverageSampler, fetch_cloud
 from services.processes import ProcessGroup, free_tcp_port, spacemap_command
 
@@ -115,6 +115,7 @@ def _record(
             raise MissionError("the edge did not answer the final map/cloud query")
         _catch_up(monitor, cloud.tick)
         live = _live_fields(config, monitor, completed, wall_s, sample_every_s)
+        _wait_for_tracks(monitor, mission_end_stamp_ns(config, live))
         return write_run_folder(out_dir, config, monitor, sampler, cloud, live, probe)
 
 
@@ -171,6 +172,14 @@ def _halt(group: ProcessGroup, name: str, grace_s: float = 10.0) -> None:
     except subprocess.TimeoutExpired:
         proc.kill()
         proc.wait(timeout=grace_s)
+
+
+def _wait_for_tracks(monitor: Monitor, end_stamp_ns: int, timeout_s: float = 3.0) -> None:
+    """Read the inbox until every robot's truth and estimate reached the mission's end (or
+    the deadline: a stream that stopped earlier is then cut where every stream has data)."""
+    deadline = time.monotonic() + timeout_s
+    while not monitor.tracks_reach(end_stamp_ns) and time.monotonic() < deadline:
+        monitor.pump(timeout=0.05)
 
 
 def _catch_up(monitor: Monitor, edge_tick: int, timeout_s: float = 3.0) -> None:
