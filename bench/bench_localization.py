@@ -10,7 +10,8 @@ metric) of the 5 cm voxel map each robot builds from its estimated poses, agains
 map built from the true poses. Rendered frames are cached next to the run, so parameter
 sweeps replay in about a minute.
 
-Run: .venv/bin/python bench/bench_localization.py RUN_DIR [--set reg_step_m=0.05 ...]
+Run: .venv/bin/python bench/bench_localization.py RUN_DIR... [--set reg_fusion=gate ...]
+[--filter r_m=0.01 ...]; with several run folders a summary line closes the output.
 (RUN_DIR from e.g. `spacemap run --robots 3 --sim-time 300 --out RUN_DIR`).
 """
 
@@ -35,6 +36,7 @@ from services.common.geometry import T_from_xyyaw, transform_points, xyyaw_from_
 from services.evaluator import run_files as rf  # noqa: E402
 from services.evaluator.evaluate import RunConfig, probe_for  # noqa: E402
 from services.robot_agent.config import AgentConfig  # noqa: E402
+from services.robot_agent.drift_filter import FilterParams  # noqa: E402
 from services.robot_agent.localization import Localizer  # noqa: E402
 from services.robot_agent.params import registration_params  # noqa: E402
 from services.robot_agent.projection import cam_to_base, depth_to_points  # noqa: E402
@@ -43,6 +45,7 @@ from services.simulator.odometry import WheelOdometry  # noqa: E402
 
 log = logging.getLogger("bench_localization")
 VOXEL_M = 0.05
+FAIL_M = 0.08  # a pose this far off maps walls into ghosts (> 0.10 m with 5 cm voxels)
 
 
 @dataclass
@@ -148,25 +151,49 @@ def replay(rec: Recording, robot: int, cfg: AgentConfig, sim_cfg, poses_true: bo
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("run_dir", type=Path)
+    ap.add_argument("run_dirs", type=Path, nargs="+", help="finished mission folders")
     ap.add_argument("--set", nargs="*", default=[], help="AgentConfig overrides, key=value")
     ap.add_argument("--reg", nargs="*", default=[], help="RegistrationParams overrides")
+    ap.add_argument("--filter", nargs="*", default=None,
+                    help="fuse by the drift filter (drift_filter.FilterParams overrides)")
     ap.add_argument("--robots", type=int, nargs="*", help="only these robots")
     ap.add_argument("--truth", action="store_true", help="also build maps from the true poses")
     args = ap.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     overrides = {k: yaml.safe_load(v) for k, v in (s.split("=", 1) for s in args.set)}
     reg = {k: yaml.safe_load(v) for k, v in (s.split("=", 1) for s in args.reg)}
+    if args.filter is not None:
+        reg["filter"] = FilterParams(
+            **{k: yaml.safe_load(v) for k, v in (s.split("=", 1) for s in args.filter)})
 
-    run_cfg = RunConfig.read(args.run_dir / "config.yaml")
     cfg = AgentConfig(**overrides)
-    rec = load_or_record(args.run_dir)
-    probe = probe_for(run_cfg.sim)
-    maps, truth_maps = [], []
     print(f"overrides {overrides} {reg}")
-    for r in args.robots or range(rec.poses.shape[0]):
+    team_bv, max_err = [], []
+    for run_dir in args.run_dirs:
+        print(f"== {run_dir}")
+        bv_run, errs = replay_run(run_dir, cfg, reg, args.robots, args.truth)
+        team_bv.append(bv_run)
+        max_err += errs
+    if len(args.run_dirs) > 1:
+        over = sum(e > FAIL_M for e in max_err)
+        print(f"summary over {len(args.run_dirs)} runs: team map BV median "
+              f"{np.median(team_bv):.4f} %, mean {np.mean(team_bv):.4f} %, worst "
+              f"{max(team_bv):.4f} %; robots whose error passed {FAIL_M * 100:.0f} cm: "
+              f"{over} of {len(max_err)}")
+
+
+def replay_run(run_dir: Path, cfg: AgentConfig, reg: dict, robots: list[int] | None,
+               truth: bool) -> tuple[float, list[float]]:
+    """(team map BV %, each robot's largest xy error m) of one run's replay; prints a line per
+    robot."""
+    run_cfg = RunConfig.read(run_dir / "config.yaml")
+    rec = load_or_record(run_dir)
+    probe = probe_for(run_cfg.sim)
+    maps, truth_maps, max_err = [], [], []
+    for r in robots or range(rec.poses.shape[0]):
         exy, eyaw, acc, ms, world = replay(rec, r, cfg, run_cfg.sim, reg=reg)
         maps.append(world)
+        max_err.append(float(exy.max()))
         bins = np.array_split(np.arange(len(exy)), 6)
         trend = " ".join(f"{exy[b].max() * 100:4.1f}/{np.degrees(eyaw[b].max()):.1f}°"
                          for b in bins)
@@ -174,11 +201,13 @@ def main() -> None:
               f"{exy.max() * 100:.1f} cm; yaw max {np.degrees(eyaw.max()):.2f}°; accepted "
               f"{acc.mean() * 100:.0f} %; {np.median(ms):.1f} ms/frame; per sixth (cm/°): "
               f"{trend}; BV {bv(probe, world):.4f} %")
-        if args.truth:
+        if truth:
             truth_maps.append(replay(rec, r, cfg, run_cfg.sim, poses_true=True)[4])
-    print(f"team map BV {bv(probe, np.concatenate(maps)):.4f} %")
-    if args.truth:
+    team = bv(probe, np.concatenate(maps))
+    print(f"team map BV {team:.4f} %")
+    if truth:
         print(f"team map BV with true poses {bv(probe, np.concatenate(truth_maps)):.4f} %")
+    return team, max_err
 
 
 def bv(probe, points_world: np.ndarray) -> float:

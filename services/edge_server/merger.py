@@ -29,6 +29,7 @@ from services.common.registration import (
     world_box,
 )
 from services.common.voxels import centres, unpack
+from services.edge_server.consistency import ConsistencyParams, select
 from services.edge_server.submap_store import StoredSubmap, SubmapKey, SubmapStore
 
 log = logging.getLogger(__name__)
@@ -50,6 +51,8 @@ class MergerParams:
     correction_tol_m: float = 0.01
     correction_tol_rad: float = 0.004
     registration: RegistrationParams = field(default_factory=RegistrationParams)
+    # inter-robot edges enter the graph only inside a consistent set (None: every edge)
+    consistency: ConsistencyParams | None = field(default_factory=ConsistencyParams)
 
 
 def pose_change(T_a: np.ndarray, T_b: np.ndarray) -> tuple[float, float]:
@@ -136,6 +139,16 @@ class MapMerger:
         log.debug("registration %s ← %s: %s", target.key, source.key,
                   "kept" if edge else "rejected")
 
+    def _consistent(self, edges: list[Between], store: SubmapStore) -> list[bool]:
+        """PCM over the registrations (consistency.py); each robot's chain is its reports."""
+        if self.params.consistency is None:
+            return [True] * len(edges)
+        keys = {k for e in edges for k in (e.a, e.b)}
+        subs = {k: store.submaps[k] for k in keys}
+        return select(edges, {k: sm.T_reported for k, sm in subs.items()},
+                      {k: (sm.robot_id, sm.epoch) for k, sm in subs.items()},
+                      self.params.consistency)
+
     # -- update ----------------------------------------------------------------------------
     def update(self, store: SubmapStore) -> dict[SubmapKey, np.ndarray]:
         by_robot: dict[int, list[StoredSubmap]] = {}
@@ -153,9 +166,14 @@ class MapMerger:
         if not self._dirty or not edges:
             return {}
         self._dirty = False
+        kept = self._consistent(edges, store)
+        self.inliers = {(e.a, e.b): False for e in edges}
+        edges = [e for e, ok in zip(edges, kept, strict=True) if ok]
+        if not edges:
+            return {}
         result = optimize(self.estimates, list(self.priors.values()), self.odometry + edges)
-        self.inliers = {(e.a, e.b): ok for e, ok in
-                        zip(edges, result.inlier[len(self.odometry):], strict=True)}
+        self.inliers.update({(e.a, e.b): ok for e, ok in
+                             zip(edges, result.inlier[len(self.odometry):], strict=True)})
         self.estimates = result.poses
         changed = {}
         for key, T in result.poses.items():

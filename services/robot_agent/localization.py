@@ -24,6 +24,7 @@ import numpy as np
 import small_gicp
 
 from services.common.geometry import T_from_xyyaw, invert, wrap_angle, xyyaw_from_T
+from services.robot_agent.drift_filter import FilterParams, fuse, measurement_cov, predict
 
 
 @dataclass(frozen=True)
@@ -46,6 +47,9 @@ class RegistrationParams:
     max_removed_frac: float = 0.35  # no registration of frames the DRF took more of
     degenerate_ratio: float = 0.0  # weakest / strongest translation information below this:
     # the correction along the weak direction is dropped (0 = never)
+    # a Kalman filter on the pose (drift_filter.py) instead of the jump gate; frames it
+    # rejects stay out of the map
+    filter: FilterParams | None = None
 
 
 @dataclass(frozen=True)
@@ -113,6 +117,24 @@ class FrameRegistrar:
         self.n_inserted += 1
         return outcome
 
+    def align(self, cloud: small_gicp.PointCloud, guess: np.ndarray,
+              ) -> tuple[np.ndarray, np.ndarray] | str:
+        """(planar T_loc_base, GICP Hessian) of one frame against the map, or why not."""
+        p = self.params
+        res = small_gicp.align(
+            self.voxelmap, cloud, guess, max_correspondence_distance=p.max_corr_m,
+            num_threads=1, max_iterations=p.max_iterations,
+        )
+        if not res.converged:
+            return "not converged"
+        if res.num_inliers < p.min_inlier_frac * cloud.size():
+            return "few inliers"
+        return planar(res.T_target_source), np.asarray(res.H)
+
+    def insert(self, cloud: small_gicp.PointCloud, T_loc_base: np.ndarray) -> None:
+        self.voxelmap.insert(cloud, T_loc_base)
+        self.n_inserted += 1
+
     def _align(self, cloud: small_gicp.PointCloud, guess: np.ndarray,
                gate: tuple[float, float]) -> RegistrationOutcome:
         p = self.params
@@ -162,6 +184,8 @@ class Localizer:
         self.registrar = FrameRegistrar(params)
         self.T_loc_odom = np.eye(4)
         self.outcomes: Counter[str] = Counter()  # "accepted" or the rejection reason
+        self.P = np.zeros((3, 3))  # covariance of T_loc_base (x, y, yaw): the start is known
+        self._T_odom_prev: np.ndarray | None = None
 
     def guess(self, T_odom_base: np.ndarray) -> np.ndarray:
         return self.T_loc_odom @ T_odom_base
@@ -174,11 +198,44 @@ class Localizer:
         keeps the guess and stays out of the map: what is left is a sliver GICP can slide on.
         Except the first: robots start close together, and a map anchored only after the
         initial turn in place would keep that turn's odometry error (0.44° in missions)."""
+        filt = self.registrar.params.filter
+        if filt is not None and self._T_odom_prev is not None:
+            self.P = predict(self.P, np.array(xyyaw_from_T(self.guess(self._T_odom_prev))),
+                             np.array(xyyaw_from_T(self.guess(T_odom_base))), filt)
+        self._T_odom_prev = T_odom_base.copy()
         if removed_frac > self.registrar.params.max_removed_frac and self.registrar.n_inserted:
             outcome = RegistrationOutcome(self.guess(T_odom_base), False, "hidden by teammates")
+        elif filt is not None:
+            outcome = self._filtered(points_base, self.guess(T_odom_base), filt)
         else:
             outcome = self.registrar.register(points_base, self.guess(T_odom_base), T_odom_base)
         self.outcomes["accepted" if outcome.accepted else outcome.reason] += 1
         # planar() re-orthonormalises, so rounding cannot pile up over thousands of frames
         self.T_loc_odom = planar(outcome.T_loc_base @ invert(T_odom_base))
         return outcome
+
+    def _filtered(self, points_base: np.ndarray, guess: np.ndarray,
+                  filt: FilterParams) -> RegistrationOutcome:
+        """Register, fuse with the odometry guess by the filter, insert what it accepts."""
+        reg = self.registrar
+        cloud = reg._cloud(points_base)
+        if cloud is None:
+            return RegistrationOutcome(guess, False, "too few points")
+        if reg.n_inserted == 0:
+            reg.insert(cloud, guess)
+            return RegistrationOutcome(guess, False, "empty map")
+        aligned = reg.align(cloud, guess)
+        if isinstance(aligned, str):  # new ground the map does not cover yet: keep odometry
+            reg.insert(cloud, guess)
+            return RegistrationOutcome(guess, False, aligned)
+        T_reg, H = aligned
+        meas = np.array(xyyaw_from_T(T_reg))
+        fusion = fuse(np.array(xyyaw_from_T(guess)), self.P, meas,
+                      measurement_cov(H, meas[2], filt), filt)
+        if not fusion.accepted:
+            return RegistrationOutcome(guess, False, "implausible jump")
+        self.P = fusion.P
+        T = T_from_xyyaw(*fusion.xyyaw)
+        reg.insert(cloud, T)
+        reg.n_accepted += 1
+        return RegistrationOutcome(T, True)

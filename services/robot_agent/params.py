@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from services.robot_agent.config import AgentConfig
 from services.robot_agent.drf import DrfParams
+from services.robot_agent.drift_filter import FilterParams
 from services.robot_agent.keyframe_graph import LoopParams
 from services.robot_agent.localization import RegistrationParams
 
@@ -13,7 +14,8 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
         step_m=cfg.reg_step_m, step_per_m=cfg.reg_step_per_m, step_rad=cfg.reg_step_rad,
         min_inlier_frac=cfg.reg_min_inlier_frac, map_horizon=cfg.reg_map_horizon,
         map_voxel_m=cfg.reg_map_voxel_m, degenerate_ratio=cfg.reg_degenerate_ratio,
-        max_removed_frac=cfg.reg_max_removed_frac,
+        max_removed_frac=cfg.reg_max_removed_frac, min_points=cfg.reg_min_points,
+        filter=FilterParams() if cfg.reg_fusion == "filter" else None,
     )
 
 

@@ -1,0 +1,93 @@
+"""Drift filter: registration fused with odometry by its error model (drift_filter.py)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from services.common.geometry import T_from_xyyaw, invert, xyyaw_from_T
+from services.robot_agent.drift_filter import FilterParams, fuse, measurement_cov, predict
+from services.robot_agent.localization import Localizer, RegistrationParams
+from tests.test_agent_localization import _corridor, _hessian, _room, _seen
+
+PARAMS = FilterParams()
+
+
+def _settled_P(n_frames: int, step_m: float) -> np.ndarray:
+    """P after n frames of `step_m` forward motion, each fused with a registration."""
+    P = np.zeros((3, 3))
+    R = measurement_cov(None, 0.0, PARAMS)
+    for k in range(n_frames):
+        P = predict(P, np.array([k * step_m, 0, 0]), np.array([(k + 1) * step_m, 0, 0]), PARAMS)
+        P = fuse(np.zeros(3), P, np.zeros(3), R, PARAMS).P
+    return P
+
+
+def test_a_robot_turning_in_place_cannot_be_slid_by_registration() -> None:
+    P = _settled_P(20, 0.0)
+    R = measurement_cov(None, 0.0, PARAMS)
+    slide = fuse(np.zeros(3), P, np.array([0.05, 0.0, 0.0]), R, PARAMS)
+    assert not slide.accepted  # 5 cm while the wheels did not move: implausible
+    small = fuse(np.zeros(3), P, np.array([0.01, 0.0, 0.0]), R, PARAMS)
+    assert small.accepted and 0.0 < small.xyyaw[0] < 0.004  # believed only in part
+
+
+def test_driving_widens_what_a_registration_may_correct() -> None:
+    P = _settled_P(20, 0.0)
+    for k in range(50):  # 5 m of driving without a registration
+        P = predict(P, np.array([0.1 * k, 0, 0]), np.array([0.1 * (k + 1), 0, 0]), PARAMS)
+    R = measurement_cov(None, 0.0, PARAMS)
+    fused = fuse(np.zeros(3), P, np.array([0.05, 0.02, 0.01]), R, PARAMS)
+    assert fused.accepted
+    assert abs(fused.xyyaw[0] - 0.05) < 0.01 and abs(fused.xyyaw[2] - 0.01) < 0.002
+    assert np.trace(fused.P) < np.trace(P)
+    assert np.allclose(fused.P, fused.P.T)
+
+
+def test_yaw_uncertainty_swings_later_motion_sideways() -> None:
+    P = np.diag([0.0, 0.0, 0.01**2])
+    P2 = predict(P, np.zeros(3), np.array([2.0, 0.0, 0.0]), PARAMS)
+    assert P2[1, 1] > (2.0 * 0.01) ** 2 * 0.99  # 2 m at 0.01 rad: σ_y ≥ 2 cm
+    assert abs(P2[0, 0] - PARAMS.q_m2 - PARAMS.q_m2_per_m * 2.0) < 1e-9  # along: wheel noise
+
+
+def test_corridor_keeps_odometry_along_the_aisle() -> None:
+    rng = np.random.default_rng(0)
+    yaw = math.radians(30)
+    H = _hessian(_corridor(rng), T_from_xyyaw(0.0, 0.0, yaw))
+    R = measurement_cov(H, yaw, PARAMS)
+    w, V = np.linalg.eigh(R[:2, :2])
+    assert w[1] > 100 * w[0]
+    assert abs(V[:, 1] @ np.array([1.0, 0.0])) > 0.99  # the weak direction is the aisle (x)
+    P = np.diag([0.03**2, 0.03**2, 0.005**2])
+    fused = fuse(np.zeros(3), P, np.array([0.06, 0.03, 0.0]), R, PARAMS)
+    assert abs(fused.xyyaw[0]) < 0.01  # along the aisle: odometry kept
+    assert abs(fused.xyyaw[1] - 0.03) < 0.005  # across: the registration wins
+    room = measurement_cov(_hessian(_room(np.random.default_rng(1)),
+                                    T_from_xyyaw(0.5, 0.3, 0.4)), 0.4, PARAMS)
+    assert np.linalg.cond(room[:2, :2]) < 20  # a closed room constrains both directions
+
+
+def test_filtered_localizer_removes_drift_and_ignores_a_slide() -> None:
+    rng = np.random.default_rng(2)
+    room = _room(rng)
+    loc = Localizer(RegistrationParams(map_voxel_m=0.05, min_points=30, filter=PARAMS))
+    drift = T_from_xyyaw(0.0, 0.0, 0.0)
+    errors = []
+    for k in range(40):  # 2 m forward at 5 cm per frame; odometry over-reads by 4 %
+        T_world_base = T_from_xyyaw(-1.5 + 0.05 * k, 0.2, 0.05 * math.sin(k / 6))
+        if k:
+            drift = drift @ T_from_xyyaw(0.002, 0.0, 0.001)
+        out = loc.update(_seen(room, T_world_base), T_world_base @ drift)
+        x, y, yaw = xyyaw_from_T(invert(T_world_base) @ out.T_loc_base)
+        errors.append(math.hypot(x, y))
+    assert math.hypot(*xyyaw_from_T(drift)[:2]) > 0.07  # odometry alone: 8 cm off
+    assert max(errors) < 0.015
+    # standing still, the scene suddenly fits 6 cm further on (a teammate's doorway, a
+    # symmetric wall): the map is not torn and the pose does not jump
+    inserted = loc.registrar.n_inserted
+    moved = room + np.array([0.06, 0.0, 0.0])
+    out = loc.update(_seen(moved, T_world_base), T_world_base @ drift)
+    assert not out.accepted and out.reason == "implausible jump"
+    assert loc.registrar.n_inserted == inserted
