@@ -201,7 +201,8 @@ def run(
         )
     out_dir = out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     try:
-        result = run_mission(cfg, out_dir, router_endpoint=connect, sample_every_s=sample_every)
+        result = run_mission(cfg, out_dir, router_endpoint=connect, sample_every_s=sample_every,
+                             log_level=log_level)
     except MissionError as exc:
         typer.echo(f"mission failed: {exc}", err=True)
         raise typer.Exit(1) from exc

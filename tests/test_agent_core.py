@@ -122,3 +122,14 @@ def test_cancel_drops_the_goal() -> None:
                       revenue=1.0, cancel=True))
     core.on_odometry(_odom(23, (0.0, 0.0, 0.0)))
     assert core.nav.goal is None
+
+
+def test_stays_still_until_the_first_frame_anchors_the_map() -> None:
+    """Odometry drifts only with motion: a spin before the first frame would rotate the map."""
+    core = AgentCore(AgentConfig(), 0, 0.1)
+    for k in range(3):  # idle spins, but no frame yet
+        cmd = core.on_odometry(_odom(k, (0.0, 0.0, 0.0)))[-1].message
+        assert isinstance(cmd, CmdVel) and (cmd.v_mps, cmd.omega_radps) == (0.0, 0.0)
+    core.on_rgbd(_frame(4, (0.0, 0.0, 0.0)))
+    cmd = core.on_odometry(_odom(4, (0.0, 0.0, 0.0)))[-1].message
+    assert cmd.omega_radps != 0.0  # the idle spin once the map is anchored

@@ -91,3 +91,27 @@ def test_filtered_localizer_removes_drift_and_ignores_a_slide() -> None:
     out = loc.update(_seen(moved, T_world_base), T_world_base @ drift)
     assert not out.accepted and out.reason == "implausible jump"
     assert loc.registrar.n_inserted == inserted
+
+
+def test_coupled_covariance_inflates_the_turn_that_looks_like_a_slide() -> None:
+    """A short patch of side wall 4 m ahead (y = 1, normal y) and a narrow one far ahead.
+
+    Turning by θ moves the side patch sideways by 4θ, as sliding 4θ in y would: only
+    y + 4θ is measured. The coupled R must be large along that mixture (yaw included), where
+    the yaw-marginalised R keeps yaw at r_rad."""
+    side = [(x, 1.0, z, 0.0, 1.0, 0.0) for x in np.linspace(3.8, 4.2, 9)
+            for z in np.linspace(0.2, 1.5, 6)]
+    front = [(6.0, y, z, 1.0, 0.0, 0.0) for y in np.linspace(-0.1, 0.1, 5)
+             for z in np.linspace(0.2, 1.5, 6)]
+    H6 = np.eye(6) * 1e-6
+    for *p, nx, ny, nz in side + front:  # residual n·(R p + t): rows rx, ry, rz, tx, ty, tz
+        n = np.array([nx, ny, nz])
+        J = np.concatenate([np.cross(p, n), n])
+        H6 += np.outer(J, J)
+    coupled = FilterParams(coupled_length_m=2.5)
+    R = measurement_cov(H6, 0.0, coupled)
+    R_old = measurement_cov(H6, 0.0, FilterParams())
+    assert R[0, 0] < 0.1 * R[1, 1]  # the far patch measures x
+    corr = R[1, 2] / math.sqrt(R[1, 1] * R[2, 2])
+    assert corr < -0.9  # y and yaw uncertain together, as y = -4θ leaves y + 4θ fixed
+    assert R[2, 2] > 25 * coupled.r_rad**2 and math.isclose(R_old[2, 2], coupled.r_rad**2)

@@ -39,9 +39,10 @@ def _with_endpoint(config: SpacemapConfig, endpoint: str) -> SpacemapConfig:
     return SpacemapConfig.model_validate(tree)
 
 
-def start_services(group: ProcessGroup, config_path: Path, robots: int) -> None:
+def start_services(group: ProcessGroup, config_path: Path, robots: int,
+                   log_level: str = "INFO") -> None:
     """Edge, agents, then the simulator (which waits for the others' liveliness)."""
-    cfg = ["--config", str(config_path)]
+    cfg = ["--config", str(config_path), "--log-level", log_level]
     group.start("edge", spacemap_command("edge", *cfg))
     for robot in range(robots):
         group.start(f"agent{robot}", spacemap_command("agent", "--robot", str(robot), *cfg))
@@ -55,10 +56,12 @@ def run_mission(
     stall_timeout_s: float = 120.0,
     console: Console | None = None,
     sample_every_s: float = 5.0,
+    log_level: str = "INFO",
 ) -> RunResult:
     """Start router (unless given), edge, agents and simulator; run; write the run folder.
 
-    `sample_every_s`: sim-time period of the live coverage samples (0 = final map only)."""
+    `sample_every_s`: sim-time period of the live coverage samples (0 = final map only);
+    `log_level`: the services' too (DEBUG gives each agent's per-frame registration trace)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     group = ProcessGroup(out_dir / "logs")
     try:
@@ -66,7 +69,8 @@ def run_mission(
             router_endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
             group.start("router", spacemap_command("router", "--listen", router_endpoint))
         config = _with_endpoint(config, router_endpoint)
-        metrics = _record(config, out_dir, group, stall_timeout_s, console, sample_every_s)
+        metrics = _record(config, out_dir, group, stall_timeout_s, console, sample_every_s,
+                          log_level)
     finally:
         codes = group.stop(order=["sim", "edge"])
     return RunResult(out_dir, metrics, codes)
@@ -93,6 +97,7 @@ def _record(
     stall_timeout_s: float,
     console: Console | None,
     sample_every_s: float,
+    log_level: str = "INFO",
 ) -> dict[str, object]:
     wall_start = time.monotonic()
     probe = probe_for(config.sim)  # before the services start: a cold ground truth takes seconds
@@ -101,7 +106,7 @@ def _record(
         monitor = Monitor(bus, config.sim.robots)
         sampler = CoverageSampler(monitor, probe, sample_every_s, config.sim.tick_s)
         if group is not None:
-            start_services(group, out_dir / "config.yaml", config.sim.robots)
+            start_services(group, out_dir / "config.yaml", config.sim.robots, log_level)
         sampler.start()
         try:
             completed = _watch(monitor, group, config, stall_timeout_s, console)
@@ -195,6 +200,7 @@ def _catch_up(monitor: Monitor, edge_tick: int, timeout_s: float = 3.0) -> None:
 def _live_fields(
     config: SpacemapConfig, monitor: Monitor, completed: bool, wall_s: float,
     sample_every_s: float,
+    log_level: str = "INFO",
 ) -> dict[str, object]:
     """What only the live run knows (live.json): completion, sim and wall time, traffic."""
     tick_s = config.sim.tick_s

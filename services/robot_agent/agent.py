@@ -207,6 +207,10 @@ class AgentCore:
         events = self._navigate_goal_inputs(pose_world, odom.tick)
         cmd, event = self.nav.step(pose_world, self.grid, odom.tick)
         cmd = self._yield_to_teammates(pose_world, cmd, odom.tick)
+        if self.n_frames == 0:
+            # Still until the first frame anchors the map: odometry drifts only with motion, and
+            # the yaw it lost in a first spin (0.1-0.5 deg) would rotate the whole map.
+            cmd = Command(0.0, 0.0)
         events += [event] if event is not None else []
         return self._outputs(odom, pose_world, deltas, events, cmd)
 
@@ -324,7 +328,18 @@ class AgentCore:
         self.n_frames += 1
         if not self.config.registration or (self.n_frames - 1) % self.config.register_every_frames:
             return guess
-        return self.localizer.update(points_base, T_odom_base, removed_frac).T_loc_base
+        out = self.localizer.update(points_base, T_odom_base, removed_frac)
+        if log.isEnabledFor(logging.DEBUG):  # the per-frame trace missions are diagnosed from
+            dx, dy, dyaw = xyyaw_from_T(invert(guess) @ out.T_loc_base)
+            mx, my, myaw = (xyyaw_from_T(invert(guess) @ out.T_measured)
+                            if out.T_measured is not None else (np.nan,) * 3)
+            log.debug("robot %d frame %d: %s, %d points, removed %.2f, measured (%.1f, %.1f) cm "
+                      "%.2f deg, d2 %.1f, correction (%.1f, %.1f) cm %.2f deg, sd %s",
+                      self.robot_id, self.n_frames, "accepted" if out.accepted else out.reason,
+                      len(points_base), removed_frac, 100 * mx, 100 * my, math.degrees(myaw),
+                      out.mahalanobis2, 100 * dx, 100 * dy, math.degrees(dyaw),
+                      np.round(np.sqrt(np.diag(self.localizer.P)), 4))
+        return out.T_loc_base
 
     def _integrate(
         self, frame: RgbdFrame, cam, points_base: np.ndarray, T_loc_base: np.ndarray,

@@ -36,6 +36,7 @@ class FilterParams:
     r_rad: float = 0.002
     max_weak_inflation: float = 1e4  # σ² along a degenerate direction grows by at most this
     chi2_gate: float = 16.27  # 3 dof, p = 0.999
+    coupled_length_m: float = 0.0  # > 0: R from the whole planar information (see below)
 
 
 def predict(P: np.ndarray, xyyaw_from: np.ndarray, xyyaw_to: np.ndarray,
@@ -55,24 +56,55 @@ def measurement_cov(H6: np.ndarray | None, yaw: float, params: FilterParams) -> 
     """R (loc frame) of a registration at heading `yaw` whose GICP Hessian is H6.
 
     small_gicp's H orders rx, ry, rz, tx, ty, tz in the body frame; its scale is not a
-    covariance (the point covariances are regularised), so only its shape is used: σ² along
-    the translation direction that is weaker once yaw is marginalised grows by the ratio."""
+    covariance (the point covariances are regularised), so only its shape is used. With
+    `coupled_length_m` > 0 the planar block (tx, ty, rz; z, roll, pitch marginalised) is
+    compared in (x, y, L·yaw): σ² along each weaker direction, yaw-translation mixtures
+    included (one far wall: turning ≈ sliding), grows by its ratio to the strongest. With 0
+    only the translation block is (yaw marginalised) and yaw keeps `r_rad`."""
+    if H6 is not None and params.coupled_length_m > 0:
+        return _coupled_cov(np.asarray(H6), yaw, params)
     R_t = np.eye(2) * params.r_m**2
     if H6 is not None:
         H = np.asarray(H6)[np.ix_([3, 4, 2], [3, 4, 2])]
         if H[2, 2] > 0:
             Ht = H[:2, :2] - np.outer(H[:2, 2], H[2, :2]) / H[2, 2]
-            w, V = np.linalg.eigh(0.5 * (Ht + Ht.T))
-            if w[1] > 0:
-                ratio = np.clip(w[1] / np.maximum(w, w[1] / params.max_weak_inflation), 1.0,
-                                params.max_weak_inflation)
-                R_t = V @ np.diag(params.r_m**2 * ratio) @ V.T
-    c, s = np.cos(yaw), np.sin(yaw)
-    rot = np.array([[c, -s], [s, c]])
+            R_t = _inflated(Ht, params.r_m**2, params.max_weak_inflation)
+    rot = _rot(yaw)
     out = np.zeros((3, 3))
     out[:2, :2] = rot @ R_t @ rot.T
     out[2, 2] = params.r_rad**2
     return out
+
+
+def _coupled_cov(H6: np.ndarray, yaw: float, params: FilterParams) -> np.ndarray:
+    planar, rest = [3, 4, 2], [5, 0, 1]  # tx, ty, rz | tz, rx, ry
+    A, B, C = H6[np.ix_(planar, planar)], H6[np.ix_(planar, rest)], H6[np.ix_(rest, rest)]
+    try:
+        Hp = A - B @ np.linalg.solve(C, B.T)
+    except np.linalg.LinAlgError:
+        Hp = A
+    L = params.coupled_length_m
+    S = np.diag([1.0, 1.0, 1.0 / L])  # (x, y, yaw) = S · (x, y, L·yaw)
+    Hn = np.linalg.inv(S) @ Hp @ np.linalg.inv(S)  # information in (x, y, L·yaw)
+    Rn = _inflated(Hn, params.r_m**2, params.max_weak_inflation)
+    R_body = S @ Rn @ S
+    T = np.eye(3)
+    T[:2, :2] = _rot(yaw)
+    return T @ R_body @ T.T
+
+
+def _inflated(H: np.ndarray, sigma2: float, max_inflation: float) -> np.ndarray:
+    """σ² in every direction, times (strongest / this) information along each eigenvector."""
+    w, V = np.linalg.eigh(0.5 * (H + H.T))
+    if w[-1] <= 0:
+        return np.eye(len(w)) * sigma2 * max_inflation
+    ratio = np.clip(w[-1] / np.maximum(w, w[-1] / max_inflation), 1.0, max_inflation)
+    return V @ np.diag(sigma2 * ratio) @ V.T
+
+
+def _rot(yaw: float) -> np.ndarray:
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s], [s, c]])
 
 
 @dataclass(frozen=True)

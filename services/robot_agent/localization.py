@@ -57,6 +57,8 @@ class RegistrationOutcome:
     T_loc_base: np.ndarray  # (4, 4) planar pose used (refined, or the guess)
     accepted: bool
     reason: str = ""
+    T_measured: np.ndarray | None = None  # (4, 4) what registration found, accepted or not
+    mahalanobis2: float = float("nan")  # its squared distance from the filter's prediction
 
 
 def planar(T: np.ndarray) -> np.ndarray:
@@ -233,9 +235,10 @@ class Localizer:
         fusion = fuse(np.array(xyyaw_from_T(guess)), self.P, meas,
                       measurement_cov(H, meas[2], filt), filt)
         if not fusion.accepted:
-            return RegistrationOutcome(guess, False, "implausible jump")
+            return RegistrationOutcome(guess, False, "implausible jump", T_reg,
+                                       fusion.mahalanobis2)
         self.P = fusion.P
         T = T_from_xyyaw(*fusion.xyyaw)
         reg.insert(cloud, T)
         reg.n_accepted += 1
-        return RegistrationOutcome(T, True)
+        return RegistrationOutcome(T, True, "", T_reg, fusion.mahalanobis2)
