@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from services.common.geometry import T_from_xyyaw, invert, xyyaw_from_T
-from services.robot_agent.drift_filter import FilterParams, fuse, measurement_cov, predict
+from services.robot_agent.drift_filter import FilterParams, agree, fuse, measurement_cov, predict
 from services.robot_agent.localization import Localizer, RegistrationParams
 from tests.test_agent_localization import _corridor, _hessian, _room, _seen
 
@@ -115,3 +115,31 @@ def test_coupled_covariance_inflates_the_turn_that_looks_like_a_slide() -> None:
     corr = R[1, 2] / math.sqrt(R[1, 1] * R[2, 2])
     assert corr < -0.9  # y and yaw uncertain together, as y = -4θ leaves y + 4θ fixed
     assert R[2, 2] > 25 * coupled.r_rad**2 and math.isclose(R_old[2, 2], coupled.r_rad**2)
+
+
+def test_registrations_that_agree_bring_a_wrong_estimate_back() -> None:
+    """The wheels report a 3° turn that did not happen: the gate rejects each registration
+    that asks for it back (the filter is sure of itself), until three in a row agree."""
+    rng = np.random.default_rng(3)
+    room = _room(rng)
+    loc = Localizer(RegistrationParams(map_voxel_m=0.05, min_points=30, filter=PARAMS))
+    slip = T_from_xyyaw(0.0, 0.0, 0.0)
+    outcomes = []
+    for k in range(12):
+        T_world_base = T_from_xyyaw(-1.0 + 0.02 * k, 0.1, 0.0)
+        if k == 5:
+            slip = T_from_xyyaw(0.0, 0.0, math.radians(3.0))
+        out = loc.update(_seen(room, T_world_base), T_world_base @ slip)
+        outcomes.append(out.accepted)
+    assert outcomes[5:8] == [False, False, True]  # two rejections, then the third agrees
+    assert loc.outcomes["reacquired"] == 1
+    x, y, yaw = xyyaw_from_T(invert(T_world_base) @ out.T_loc_base)
+    assert math.hypot(x, y) < 0.01 and abs(yaw) < math.radians(0.2)
+
+
+def test_registrations_that_disagree_stay_rejected() -> None:
+    tell = [np.array([0.0, 0.0, 0.05]), np.array([0.06, 0.0, 0.05]), np.array([0.0, 0.0, 0.02])]
+    assert not agree(tell, PARAMS)
+    assert agree([np.array([0.01, 0.0, 0.050]), np.array([0.0, 0.01, 0.052]),
+                  np.array([0.0, 0.0, 0.049])], PARAMS)
+    assert not agree(tell[:2], PARAMS)  # too few

@@ -24,7 +24,13 @@ import numpy as np
 import small_gicp
 
 from services.common.geometry import T_from_xyyaw, invert, wrap_angle, xyyaw_from_T
-from services.robot_agent.drift_filter import FilterParams, fuse, measurement_cov, predict
+from services.robot_agent.drift_filter import (
+    FilterParams,
+    agree,
+    fuse,
+    measurement_cov,
+    predict,
+)
 
 
 @dataclass(frozen=True)
@@ -188,6 +194,7 @@ class Localizer:
         self.outcomes: Counter[str] = Counter()  # "accepted" or the rejection reason
         self.P = np.zeros((3, 3))  # covariance of T_loc_base (x, y, yaw): the start is known
         self._T_odom_prev: np.ndarray | None = None
+        self._rejected: list[np.ndarray] = []  # T_loc_odom (x, y, yaw) each rejection implied
 
     def guess(self, T_odom_base: np.ndarray) -> np.ndarray:
         return self.T_loc_odom @ T_odom_base
@@ -235,8 +242,19 @@ class Localizer:
         fusion = fuse(np.array(xyyaw_from_T(guess)), self.P, meas,
                       measurement_cov(H, meas[2], filt), filt)
         if not fusion.accepted:
-            return RegistrationOutcome(guess, False, "implausible jump", T_reg,
-                                       fusion.mahalanobis2)
+            implied = T_reg @ invert(guess) @ self.T_loc_odom  # T_reg · T_odom_base⁻¹
+            self._rejected = self._rejected[-filt.reacquire_frames:] + [
+                np.array(xyyaw_from_T(implied))]
+            if not agree(self._rejected, filt):
+                return RegistrationOutcome(guess, False, "implausible jump", T_reg,
+                                           fusion.mahalanobis2)
+            self.outcomes["reacquired"] += 1
+            self._rejected = []
+            self.P = measurement_cov(H, meas[2], filt)
+            reg.insert(cloud, T_reg)
+            reg.n_accepted += 1
+            return RegistrationOutcome(T_reg, True, "", T_reg, fusion.mahalanobis2)
+        self._rejected = []
         self.P = fusion.P
         T = T_from_xyyaw(*fusion.xyyaw)
         reg.insert(cloud, T)
