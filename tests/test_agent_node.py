@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 from schemas import Keys
 from schemas.messages import Message, Odometry, Pose2D, RobotPose
 from services.common.bus import Inbound
