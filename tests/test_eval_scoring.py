@@ -8,7 +8,7 @@ import numpy as np
 
 from schemas import messages as m
 from services.evaluator import run_files as rf
-from services.evaluator.scoring import distance_at, overlap_from_masks
+from services.evaluator.scoring import distance_at
 
 
 def test_distance_at_sums_robots_up_to_each_time() -> None:
@@ -16,13 +16,6 @@ def test_distance_at_sums_robots_up_to_each_time() -> None:
     xy = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 2.0]])
     tracks = [(stamps, xy), (stamps, 2 * xy)]
     assert distance_at(np.array([0.0, 1.0, 1.5, 5.0]), tracks) == [0.0, 3.0, 3.0, 9.0]
-
-
-def test_overlap_counts_points_covered_twice() -> None:
-    a = np.array([1, 1, 0, 0], dtype=bool)
-    b = np.array([0, 1, 1, 0], dtype=bool)
-    assert overlap_from_masks([a, b]) == 100.0 / 3
-    assert overlap_from_masks([]) is None
 
 
 def test_grid_csv_ply_round_trips(tmp_path: Path) -> None:

@@ -12,6 +12,7 @@ from typer.testing import CliRunner
 
 from services.cli import app
 from services.config import load_config
+from services.evaluator import run_files as rf
 from services.evaluator.evaluate import evaluate_run_folder
 from services.evaluator.metrics import METRICS_KEYS
 from services.evaluator.scoring import LIVE_KEYS
@@ -51,6 +52,9 @@ def test_run_folder_has_every_metric_and_artefact(bench_dir: Path) -> None:
             assert (run / name).stat().st_size > 10_000, name
         lines = (run / "timeseries.csv").read_text().splitlines()
         assert len(lines) >= 4, "expected samples at 3, 6, 9 s and the final map"
+        # one overlap definition: the series ends at metrics.json's figure (4 decimals in CSV)
+        last = rf.read_csv(run / "timeseries.csv")[-1]
+        assert last["overlap_3d_pct"] == pytest.approx(metrics["overlap_3d_pct"], abs=1e-4)
     drf = {json.loads((r / "metrics.json").read_text())["drf"] for r in _run_dirs(bench_dir)}
     assert drf == {True, False}
 

@@ -53,15 +53,23 @@ def coverage_3d(
     return _pct(covered_mask(pts, gt_points, radius_m).sum(), len(_points(gt_points)))
 
 
+def overlap_pct(covered_by_robot: Sequence[np.ndarray]) -> float:
+    """The one overlap definition, the paper's "% of the map covered more than once": of the
+    ground truth (points or cells) that any robot's own map covers, the % that two or more
+    robots' maps cover. One bool mask per robot over the same truth; 0 when none is covered.
+
+    Own maps, not a merged map split by first observer: a merged voxel seen by two robots
+    belongs to one of them there, which undercounts the overlap."""
+    counts = np.sum([np.asarray(c, dtype=bool) for c in covered_by_robot], axis=0,
+                    dtype=np.int32)
+    return _pct(np.count_nonzero(counts >= 2), np.count_nonzero(counts >= 1))
+
+
 def overlap_3d(
     per_robot_points_world: Sequence[np.ndarray], gt_points: np.ndarray, radius_m: float = 0.10
 ) -> float:
-    """% of covered ground-truth points that two or more robots cover."""
-    counts = sum(
-        (covered_mask(p, gt_points, radius_m).astype(np.int32) for p in per_robot_points_world),
-        np.zeros(len(_points(gt_points)), dtype=np.int32),
-    )
-    return _pct((counts >= 2).sum(), (counts >= 1).sum())
+    """`overlap_pct` over ground-truth points: covered = a robot's point within radius."""
+    return overlap_pct([covered_mask(p, gt_points, radius_m) for p in per_robot_points_world])
 
 
 def resample_mask(mask: np.ndarray, src: GridSpec, dst: GridSpec) -> np.ndarray:
@@ -86,11 +94,9 @@ def overlap_2d(
     per_robot_known: Sequence[tuple[np.ndarray, GridSpec]], truth_free: np.ndarray,
     truth_spec: GridSpec,
 ) -> float:
-    """% of known truth cells that two or more robots know."""
-    counts = np.zeros(truth_spec.shape, dtype=np.int32)
-    for mask, spec in per_robot_known:
-        counts += resample_mask(mask, spec, truth_spec) & truth_free
-    return _pct((counts >= 2).sum(), (counts >= 1).sum())
+    """`overlap_pct` over reachable free truth cells: covered = known to a robot's grid."""
+    return overlap_pct([resample_mask(mask, spec, truth_spec) & truth_free
+                        for mask, spec in per_robot_known])
 
 
 def rmse_3d_cm(map_points_world: np.ndarray, gt_points: np.ndarray) -> float | None:

@@ -76,6 +76,14 @@ class Probe:
         fg = self.gt.free_grid
         return mx.coverage_2d(grid.cells >= 0, grid_spec(grid), fg.free, fg.spec)
 
+    def overlap_3d(self, robot_points: Sequence[np.ndarray] | None) -> float | None:
+        """`metrics.overlap_3d` of the robots' own maps on the observable truth (None
+        without them); the time series and metrics.json both take it from here."""
+        if not robot_points:
+            return None
+        return mx.overlap_3d(robot_points, self.gt.observable_points_world,
+                             self.ev.coverage_radius_m)
+
     def overlap_2d(self, grids: Sequence[m.OccupancyGrid] | None) -> float | None:
         if not grids:
             return None
@@ -83,30 +91,19 @@ class Probe:
         return mx.overlap_2d([(g.cells >= 0, grid_spec(g)) for g in grids], fg.free, fg.spec)
 
 
-def overlap_from_masks(masks: Sequence[np.ndarray]) -> float | None:
-    """% of covered truth points covered by two or more robots (None without robots)."""
-    if not masks:
-        return None
-    counts = np.sum([mk.astype(np.int32) for mk in masks], axis=0)
-    covered = int((counts >= 1).sum())
-    return 100.0 * int((counts >= 2).sum()) / covered if covered else 0.0
-
-
 def map_quality(
     probe: Probe, points_world: np.ndarray, robot_points: Sequence[np.ndarray] | None
 ) -> dict[str, float | None]:
-    """3D coverage (ghost points excluded), overlap, RMSE, BV and ghost volume of one map."""
+    """3D coverage (ghost points excluded), RMSE, BV and ghost volume of one map, and the 3D
+    overlap of `robot_points`, each robot's own map (None: no overlap)."""
     pts = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
     dist = probe.surface_distance(pts)
     ghost, n_ghost, n_occupied = probe.ghost_point_mask(pts, dist)
     total = len(probe.gt.observable_points_world)
     cov = 100.0 * probe.covered(pts[~ghost]).sum() / total if total else 0.0
-    overlap = None
-    if robot_points is not None:
-        overlap = overlap_from_masks([probe.covered(p) for p in robot_points])
     return {
         "coverage_3d_pct": float(cov),
-        "overlap_3d_pct": overlap,
+        "overlap_3d_pct": probe.overlap_3d(robot_points),
         "rmse_3d_cm": float(np.sqrt(np.mean(dist**2)) * 100.0) if len(pts) else None,
         "bounding_volume_pct": 100.0 * n_ghost / n_occupied if n_occupied else 0.0,
         "ghost_volume_m3": n_ghost * probe.ev.voxel_m**3,

@@ -19,7 +19,7 @@ from services.evaluator.evaluate import evaluate_run_folder, load_tracks
 from services.evaluator.plots import plot_coverage, plot_map_top
 from services.evaluator.scoring import Probe, distance_at
 from services.launcher.monitor import Monitor
-from services.launcher.sampler import CoverageSampler, fetch_robot_grid, robot_clouds
+from services.launcher.sampler import SPLIT_MAPS, CoverageSampler, fetch_robot_grid, robot_clouds
 
 log = logging.getLogger(__name__)
 
@@ -43,9 +43,13 @@ def write_run_folder(
 ) -> dict[str, Any]:
     """Write every artefact of a run and return metrics.json's content."""
     robots = config.sim.robots
-    sampler.add(final_cloud)  # the series ends at the final map
+    per_robot, live["robot_maps_source"] = robot_clouds(monitor.bus, final_cloud, robots)
+    if SPLIT_MAPS in live["robot_maps_source"]:
+        log.warning("per-robot clouds: some from the merged map split by robot_ids")
+    # the series ends at the final map, scored on the very robot maps metrics.json reads
+    sampler.add(final_cloud, per_robot)
     monitor.trim_to_common_tick(mission_end_stamp_ns(config, live))
-    _write_maps(out_dir, monitor, final_cloud, robots, live)
+    _write_maps(out_dir, monitor, final_cloud, per_robot, robots, live)
     for robot, track in monitor.tracks.items():
         rf.write_tum(rf.gt_trajectory_path(out_dir, robot), track.gt_stamps_ns, track.gt_xyyaw)
         rf.write_tum(rf.est_trajectory_path(out_dir, robot), track.est_stamps_ns,
@@ -65,11 +69,10 @@ def write_run_folder(
 
 
 def _write_maps(
-    out_dir: Path, monitor: Monitor, cloud: m.Cloud, robots: int, live: dict[str, Any]
+    out_dir: Path, monitor: Monitor, cloud: m.Cloud, per_robot: list[np.ndarray], robots: int,
+    live: dict[str, Any],
 ) -> None:
     rf.write_ply(out_dir / rf.MERGED_MAP, cloud.points_world, cloud.colors)
-    per_robot, source = robot_clouds(monitor.bus, cloud, robots)
-    live["robot_maps_source"] = source
     for robot, points in enumerate(per_robot):
         rf.write_ply(rf.robot_map_path(out_dir, robot), points)
     if monitor.grid is not None:

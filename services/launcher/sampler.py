@@ -1,5 +1,6 @@
-"""Live queries of the edge's maps: final per-robot clouds and grids, and a coverage time
-series sampled from the merged cloud every few sim seconds on a background thread.
+"""Live queries of the edge's maps: per-robot clouds and grids, and a coverage time series
+sampled every few sim seconds on a background thread: coverage, BV and ghost volume from the
+merged cloud, 3D overlap from each robot's own map, by the code that scores metrics.json.
 
 In lockstep the simulator does not wait for the launcher, so a sample is stamped with the
 tick the edge had reached when it answered (Cloud.tick), not the tick that was asked for.
@@ -10,6 +11,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -51,29 +53,33 @@ def fetch_robot_grid(bus: Bus, robot_id: int, timeout: float = 5.0) -> m.Occupan
     return reply
 
 
-def robot_clouds(bus: Bus, merged: m.Cloud, robots: int) -> tuple[list[np.ndarray], str]:
+OWN_MAPS, SPLIT_MAPS = "edge per-robot map", "merged map split by robot_ids"
+
+
+def robot_clouds(
+    bus: Bus, merged: m.Cloud, robots: int, timeout: float = FINAL_TIMEOUT_S
+) -> tuple[list[np.ndarray], str]:
     """Each robot's own map; where the edge answers with something else (an older edge
-    ignores CloudRequest.robot_id), the merged map's points tagged with that robot."""
+    ignores CloudRequest.robot_id), the merged map's points tagged with that robot (a voxel
+    seen by several robots then counts for its first observer only: less overlap)."""
     out, sources = [], set()
     for robot in range(robots):
-        reply = fetch_cloud(bus, robot)
+        reply = fetch_cloud(bus, robot, timeout)
         if reply is not None and reply.robot_id == robot:
             out.append(reply.points_world.astype(np.float64))
-            sources.add("edge per-robot map")
+            sources.add(OWN_MAPS)
         else:
             out.append(merged.points_world[merged.robot_ids == robot].astype(np.float64))
-            sources.add("merged map split by robot_ids")
-    if "merged map split by robot_ids" in sources:
-        log.warning("per-robot clouds: some from the merged map split by robot_ids")
+            sources.add(SPLIT_MAPS)
     return out, " + ".join(sorted(sources))
 
 
-def series_row(probe: Probe, cloud: m.Cloud, grid: m.OccupancyGrid | None, tick_s: float,
-               frontiers: int) -> dict[str, Any]:
-    """One time-series row from the merged cloud (overlap from its per-point robot ids)."""
+def series_row(probe: Probe, cloud: m.Cloud, robot_points: Sequence[np.ndarray],
+               grid: m.OccupancyGrid | None, tick_s: float, frontiers: int) -> dict[str, Any]:
+    """One time-series row: the merged cloud's figures and the overlap of `robot_points`, the
+    robots' own maps, both by `map_quality` as in metrics.json."""
     pts = cloud.points_world.astype(np.float64)
-    per_robot = [pts[cloud.robot_ids == r] for r in np.unique(cloud.robot_ids)]
-    quality = map_quality(probe, pts, per_robot)
+    quality = map_quality(probe, pts, robot_points)
     known = int((grid.cells >= 0).sum()) if grid is not None else 0
     return {
         "sim_time_s": round(cloud.tick * tick_s, 6),
@@ -89,7 +95,8 @@ def series_row(probe: Probe, cloud: m.Cloud, grid: m.OccupancyGrid | None, tick_
 
 
 class CoverageSampler:
-    """Samples the merged map every `every_s` sim seconds on its own thread."""
+    """Samples the merged map and the robots' own maps every `every_s` sim seconds on its
+    own thread."""
 
     def __init__(self, monitor: Monitor, probe: Probe, every_s: float, tick_s: float) -> None:
         self.monitor, self.probe, self.every_s, self.tick_s = monitor, probe, every_s, tick_s
@@ -103,18 +110,24 @@ class CoverageSampler:
 
     def stop(self) -> None:
         self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout=SAMPLE_TIMEOUT_S + 30.0)
+        if self._thread.is_alive():  # a sample makes 1 + robots queries
+            self._thread.join(timeout=SAMPLE_TIMEOUT_S * (1 + self.monitor.robots) + 30.0)
 
     def _loop(self) -> None:
         due = self.every_s
         while not self._stop.wait(0.05):
             if self.monitor.sim_time_s < due:
                 continue
-            cloud = fetch_cloud(self.monitor.bus, -1, SAMPLE_TIMEOUT_S)
-            if cloud is not None:
-                self.add(cloud)
+            self.sample()
             due = (np.floor(self.monitor.sim_time_s / self.every_s) + 1) * self.every_s
+
+    def sample(self) -> None:
+        """Query the merged map, then each robot's own map, and add a row. The robot maps
+        may be a tick or two newer than the merged one (separate queries)."""
+        bus = self.monitor.bus
+        cloud = fetch_cloud(bus, -1, SAMPLE_TIMEOUT_S)
+        if cloud is not None:
+            self.add(cloud, robot_clouds(bus, cloud, self.monitor.robots, SAMPLE_TIMEOUT_S)[0])
 
     def _await_edge_tick(self, tick: int, timeout_s: float = 2.0) -> None:
         """The edge publishes its grid of tick k before it can answer with Cloud(tick=k), but
@@ -126,11 +139,12 @@ class CoverageSampler:
                and time.monotonic() < deadline):
             pause.wait(0.02)  # the main thread pumps the monitor meanwhile
 
-    def add(self, cloud: m.Cloud) -> None:
-        """Add a sample (also used for the final map); keeps rows in sim-time order."""
+    def add(self, cloud: m.Cloud, robot_points: Sequence[np.ndarray]) -> None:
+        """Add a sample (also used for the final map, with the robot maps the run folder
+        keeps, so the last row's overlap is metrics.json's); keeps rows in sim-time order."""
         self._await_edge_tick(cloud.tick)
         grid, frontiers = self.monitor.at_tick(cloud.tick)
-        row = series_row(self.probe, cloud, grid, self.tick_s, frontiers)
+        row = series_row(self.probe, cloud, robot_points, grid, self.tick_s, frontiers)
         if self.rows and row["sim_time_s"] < self.rows[-1]["sim_time_s"]:
             return
         if self.rows and row["sim_time_s"] == self.rows[-1]["sim_time_s"]:
