@@ -1,4 +1,5 @@
-"""Whole-mission wall time: `spacemap run` repeated, medians of wall time and key metrics.
+"""Whole-mission wall time: `spacemap run` repeated, medians of wall time and key metrics,
+and where the CPU went (each run's profile.json: CPU seconds per process).
 
     .venv/bin/python bench/bench_mission.py --robots 3 --sim-time 120 --repeats 3
 """
@@ -16,10 +17,26 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
-def run_once(out: Path, args: list[str]) -> dict:
+def run_once(out: Path, args: list[str]) -> tuple[dict, dict]:
+    """(metrics.json, profile.json) of one `spacemap run`."""
     cmd = [sys.executable, "-m", "services", "run", "--out", str(out), *args]
     subprocess.run(cmd, cwd=REPO, check=True, capture_output=True)
-    return json.loads((out / "metrics.json").read_text())
+    return (json.loads((out / "metrics.json").read_text()),
+            json.loads((out / "profile.json").read_text()))
+
+
+def cpu_rows(profiles: list[dict]) -> dict[str, list[float]]:
+    """CPU seconds per process kind and run: agents summed, each other process alone."""
+    rows: dict[str, list[float]] = {}
+    for prof in profiles:
+        kinds: dict[str, float] = {}
+        for name, sec in prof["cpu_s"].items():
+            kind = "agents (sum)" if name.startswith("agent") else name
+            kinds[kind] = kinds.get(kind, 0.0) + sec
+        kinds["total"] = prof["cpu_s_total"]
+        for kind, sec in kinds.items():
+            rows.setdefault(kind, []).append(sec)
+    return rows
 
 
 def main() -> None:
@@ -32,22 +49,30 @@ def main() -> None:
     opts = parser.parse_args()
     args = ["--robots", str(opts.robots), "--sim-time", str(opts.sim_time),
             "--world", opts.world, "--seed", str(opts.seed)]
-    runs = []
+    runs, profiles = [], []
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(opts.repeats):
-            runs.append(run_once(Path(tmp) / f"run{i}", args))
+            metrics, profile = run_once(Path(tmp) / f"run{i}", args)
+            runs.append(metrics)
+            profiles.append(profile)
     keys = ("wall_time_s", "sim_time_s", "coverage_3d_pct", "coverage_2d_pct",
             "bounding_volume_pct", "total_distance_m")
     print(f"spacemap run {' '.join(args)}; {opts.repeats} runs, medians\n")
     print("| measure | median | min | max |\n|---|---:|---:|---:|")
     for key in keys:
-        values = [float(r[key]) for r in runs if r.get(key) is not None]
-        if values:
-            print(f"| {key} | {statistics.median(values):.2f} | {min(values):.2f} | "
-                  f"{max(values):.2f} |")
+        _row(key, [float(r[key]) for r in runs if r.get(key) is not None])
+    _row("real-time factor", [float(p["real_time_factor"]) for p in profiles])
+    print("\n| CPU s per process | median | min | max |\n|---|---:|---:|---:|")
+    for kind, values in cpu_rows(profiles).items():
+        _row(kind, values)
     completed = sum(bool(r["completed"]) for r in runs)
     print(f"\ncompleted before the cap: {completed}/{opts.repeats}")
 
+
+def _row(name: str, values: list[float]) -> None:
+    if values:
+        print(f"| {name} | {statistics.median(values):.2f} | {min(values):.2f} | "
+              f"{max(values):.2f} |")
 
 if __name__ == "__main__":
     main()

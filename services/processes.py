@@ -65,6 +65,15 @@ class ProcessGroup:
         out.close()
         log.debug("started %s (pid %d): %s", name, self.children[name].pid, " ".join(argv))
 
+    def cpu_seconds(self) -> dict[str, float]:
+        """CPU time (user + system, all threads) each live child has used so far."""
+        out = {}
+        for name, proc in self.children.items():
+            cpu = process_cpu_seconds(proc.pid) if proc.poll() is None else None
+            if cpu is not None:
+                out[name] = cpu
+        return out
+
     def dead(self) -> dict[str, int]:
         """Children that have exited, with their exit codes."""
         return {n: p.returncode for n, p in self.children.items() if p.poll() is not None}
@@ -95,3 +104,14 @@ class ProcessGroup:
                 log.warning("%s ignored SIGTERM; killing it", name)
                 proc.kill()
                 proc.wait()
+
+
+def process_cpu_seconds(pid: int) -> float | None:
+    """User + system CPU seconds of a running process (Linux /proc), None if it is gone."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    fields = stat[stat.rindex(")") + 2:].split()  # the name in () may contain spaces
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime
+

@@ -55,6 +55,13 @@ def test_run_folder_has_every_metric_and_artefact(bench_dir: Path) -> None:
         # one overlap definition: the series ends at metrics.json's figure (4 decimals in CSV)
         last = rf.read_csv(run / "timeseries.csv")[-1]
         assert last["overlap_3d_pct"] == pytest.approx(metrics["overlap_3d_pct"], abs=1e-4)
+        # where the CPU went: every service process and the launcher, all of them busy
+        profile = json.loads((run / "profile.json").read_text())
+        assert set(profile["cpu_s"]) == {"router", "edge", "agent0", "agent1", "sim", "launcher"}
+        assert all(sec > 0 for sec in profile["cpu_s"].values())
+        assert profile["cpu_s_total"] == pytest.approx(sum(profile["cpu_s"].values()), abs=0.1)
+        assert profile["real_time_factor"] == pytest.approx(
+            metrics["sim_time_s"] / profile["wall_time_s"], rel=1e-2)
     drf = {json.loads((r / "metrics.json").read_text())["drf"] for r in _run_dirs(bench_dir)}
     assert drf == {True, False}
 

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import logging
+import resource
 import subprocess
 import time
 from dataclasses import dataclass
@@ -115,13 +117,40 @@ def _record(
         if completed and group is not None:
             _halt(group, "sim")
         wall_s = time.monotonic() - wall_start
+        cpu_s = _cpu_seconds(group)
         cloud = fetch_cloud(bus)
         if cloud is None:
             raise MissionError("the edge did not answer the final map/cloud query")
         _catch_up(monitor, cloud.tick)
         live = _live_fields(config, monitor, completed, wall_s, sample_every_s)
         _wait_for_tracks(monitor, mission_end_stamp_ns(config, live))
-        return write_run_folder(out_dir, config, monitor, sampler, cloud, live, probe)
+        metrics = write_run_folder(out_dir, config, monitor, sampler, cloud, live, probe)
+    write_profile(out_dir / PROFILE, cpu_s, wall_s, float(metrics["sim_time_s"]))
+    return metrics
+
+
+PROFILE = "profile.json"
+
+
+def _cpu_seconds(group: ProcessGroup | None) -> dict[str, float]:
+    """CPU seconds per process of the mission so far: each child, and this launcher (its
+    monitor and live coverage sampler)."""
+    cpu = group.cpu_seconds() if group is not None else {}
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    cpu["launcher"] = own.ru_utime + own.ru_stime
+    return cpu
+
+
+def write_profile(path: Path, cpu_s: dict[str, float], wall_s: float, sim_s: float) -> None:
+    """profile.json: where a mission's CPU went (bench/bench_mission.py reads it)."""
+    profile = {
+        "wall_time_s": round(wall_s, 3),
+        "sim_time_s": sim_s,
+        "real_time_factor": round(sim_s / wall_s, 3) if wall_s > 0 else None,
+        "cpu_s": {name: round(sec, 2) for name, sec in sorted(cpu_s.items())},
+        "cpu_s_total": round(sum(cpu_s.values()), 2),
+    }
+    path.write_text(json.dumps(profile, indent=2) + "\n")
 
 
 def _watch(
