@@ -114,10 +114,10 @@ def _record(
             completed = _watch(monitor, group, config, stall_timeout_s, console)
         finally:
             sampler.stop()
+        cpu_s = _cpu_seconds(group)  # before the halt: a stopped sim has no /proc entry
         if completed and group is not None:
             _halt(group, "sim")
         wall_s = time.monotonic() - wall_start
-        cpu_s = _cpu_seconds(group)
         cloud = fetch_cloud(bus)
         if cloud is None:
             raise MissionError("the edge did not answer the final map/cloud query")
