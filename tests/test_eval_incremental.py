@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.spatial import cKDTree
 
 from services.common import voxels
 from services.common.grid import GridSpec
@@ -87,17 +86,20 @@ def test_emptied_map_and_no_robot_maps() -> None:
 
 
 def test_radius_bound_is_strict_like_covered_mask() -> None:
-    """Truth points at exactly the radius (in float arithmetic or one ulp off) are covered
-    exactly when `covered_mask` says so."""
+    """Truth points at exactly the radius (in float arithmetic or one ulp off), or on the
+    point, are covered exactly when `covered_mask` says so, as points come and go."""
     centre = np.array([[0.025, 0.025, 0.025]])
     r = 0.10
-    offsets = np.array([r, np.nextafter(r, 0), np.nextafter(r, 1), 0.5 * r])
+    offsets = np.array([r, np.nextafter(r, 0), np.nextafter(r, 1), 0.5 * r, 0.0])
     truth = np.concatenate([centre + np.outer(offsets, axis) for axis in np.eye(3)])
-    truth = np.concatenate([truth, centre + np.c_[offsets, offsets, 0 * offsets] / np.sqrt(2)])
-    index = TruthIndex(truth, cKDTree(truth), r)
-    got = index.hits(centre) > 0
-    assert np.array_equal(got, covered_mask(centre, truth, r))
-    assert 0 < got.sum() < len(truth)
+    truth = np.concatenate([truth, centre + np.c_[offsets, offsets, 0 * offsets] / np.sqrt(2),
+                            centre - np.c_[offsets, 0 * offsets, offsets] / np.sqrt(2)])
+    tally = MapTally(TruthIndex(truth, r), VOXEL_M, None)
+    other = centre + 3 * VOXEL_M
+    for pts in (centre, np.concatenate([centre, other]), other, centre):
+        assert tally.update(pts)
+        assert np.array_equal(tally.covered, covered_mask(pts, truth, r))
+    assert 0 < tally.covered.sum() < len(truth)
 
 
 def test_a_point_moved_inside_its_voxel_is_scored_again() -> None:
@@ -131,8 +133,8 @@ def test_a_sample_scores_only_new_points(monkeypatch: pytest.MonkeyPatch) -> Non
     pts = lattice(rng, 400)
     scorer(pts, [pts])
     looked_up: list[int] = []
-    real = TruthIndex.hits
-    monkeypatch.setattr(TruthIndex, "hits",
+    real = TruthIndex.around
+    monkeypatch.setattr(TruthIndex, "around",
                         lambda self, p: looked_up.append(len(p)) or real(self, p))
     more = np.concatenate([pts, lattice(rng, 30)])
     more = more[np.unique(voxels.pack(voxels.voxel_indices(more, VOXEL_M)),
