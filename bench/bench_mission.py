@@ -46,13 +46,17 @@ def main() -> None:
     parser.add_argument("--world", default="house")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--keep", type=Path, default=None,
+                        help="write the run folders here (runN/) instead of a temporary one, "
+                             "e.g. to compare metrics.json before and after a change")
     opts = parser.parse_args()
     args = ["--robots", str(opts.robots), "--sim-time", str(opts.sim_time),
             "--world", opts.world, "--seed", str(opts.seed)]
     runs, profiles = [], []
     with tempfile.TemporaryDirectory() as tmp:
+        root = opts.keep or Path(tmp)
         for i in range(opts.repeats):
-            metrics, profile = run_once(Path(tmp) / f"run{i}", args)
+            metrics, profile = run_once(root / f"run{i}", args)
             runs.append(metrics)
             profiles.append(profile)
     keys = ("wall_time_s", "sim_time_s", "coverage_3d_pct", "coverage_2d_pct",

@@ -81,6 +81,49 @@ def test_merged_map_of_two_overlapping_submaps() -> None:
     assert len(merged) == 10 + 11 - 0  # robot 1 now starts at voxel 20
 
 
+def robot_cloud_from_parts(merged: MergedMap, robot: int) -> tuple[np.ndarray, np.ndarray]:
+    """The reference: every voxel of the robot's parts once, earliest tick first."""
+    parts = [p for (r, _), p in sorted(merged._parts.items()) if r == robot]
+    if not parts:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.uint8)
+    keys = np.concatenate([p.keys_world for p in parts])
+    ticks = np.concatenate([p.first_tick for p in parts])
+    order = np.lexsort((ticks, keys))
+    first = np.r_[True, keys[order][1:] != keys[order][:-1]]
+    idx = order[first]
+    colors = np.concatenate([p.colors for p in parts])[idx]
+    return centres(unpack(keys[idx]), V), colors
+
+
+def test_robot_cloud_kept_up_to_date_equals_from_scratch() -> None:
+    """A robot's own map, extended between queries and rebuilt when one of its submaps moves,
+    equals one built from all of its parts (points and first-observer colours), whatever the
+    query timing."""
+    rng = np.random.default_rng(0)
+    store, merged = SubmapStore(V), MergedMap(V)
+    seq = {0: 0, 1: 0}
+    poses = {(r, s): T_from_xyyaw(0.1 * s, 0.05 * r, 0.0) for r in (0, 1) for s in range(3)}
+    rebuilds = 0
+    for tick in range(1, 40):
+        for _ in range(3):  # deltas: overlapping voxels, one colour per message
+            robot, sub = int(rng.integers(2)), int(rng.integers(3))
+            idx = rng.integers(0, 12, (int(rng.integers(1, 15)), 3))
+            store.apply(make_submap(robot, sub, seq[robot], tick, poses[robot, sub],
+                                    voxel_centres(idx), color=int(rng.integers(256))))
+            seq[robot] += 1
+        if rng.random() < 0.15:  # a corrected pose
+            key = next(iter(sorted(store.submaps)))
+            store.set_pose(key, T_from_xyyaw(rng.uniform(-0.2, 0.2), 0.0, rng.uniform(0, 1)))
+            rebuilds += 1
+        merged.update(store)
+        if rng.random() < 0.6:  # the sampler does not query at every plan
+            for robot in (0, 1):
+                got, want = merged.robot_cloud(robot), robot_cloud_from_parts(merged, robot)
+                np.testing.assert_array_equal(got[0], want[0])
+                np.testing.assert_array_equal(got[1], want[1])
+    assert rebuilds > 0 and len(merged.robot_cloud(0)[0]) > 100
+
+
 def test_grid_from_free_cells_and_obstacles() -> None:
     config = EdgeConfig(grid_margin_m=0.5, grid_chunk_m=0.5)
     store, merged, grid = SubmapStore(V), MergedMap(V), MergedGrid(config)

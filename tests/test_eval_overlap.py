@@ -154,3 +154,28 @@ def test_sampler_row_uses_the_robot_maps_metrics_json_scores(own: bool) -> None:
     assert row["overlap_3d_pct"] == metrics["overlap_3d_pct"]
     if own:
         assert row["overlap_3d_pct"] == mx.overlap_3d(maps, pr.gt.observable_points_world)
+
+
+def test_last_row_equals_metrics_json_after_incremental_samples() -> None:
+    """The sampler scores each sample incrementally; after maps that grew, lost voxels (a
+    pose correction) and grew again, its last row is still metrics.json's."""
+    pr = probe()
+    stages = [[voxel_centres(0.0, 0.6), voxel_centres(1.5, 2.0)],
+              [voxel_centres(0.0, 1.2), voxel_centres(0.8, 2.0)],
+              [voxel_centres(0.2, 1.0), voxel_centres(0.9, 2.0)],  # voxels removed
+              [voxel_centres(0.1, 1.4), voxel_centres(0.5, 2.0)]]
+    edge = FakeEdge(stages[0])
+    monitor = FakeMonitor(edge, 2)
+    sampler = CoverageSampler(monitor, pr, 5.0, 0.1)  # type: ignore[arg-type]
+    for tick, maps in enumerate(stages[:-1], start=1):
+        edge.maps, edge.cloud = maps, merged_cloud(maps, tick * 50)
+        monitor.recent_grids[tick * 50] = None
+        sampler.sample()
+    final = stages[-1]
+    cloud = merged_cloud(final, 200)
+    sampler.add(cloud, final)
+    assert len(sampler.rows) == len(stages)
+    metrics = metrics_json(pr, cloud, final, sampler.rows)
+    for key in ("coverage_3d_pct", "overlap_3d_pct", "bounding_volume_pct"):
+        assert sampler.rows[-1][key] == metrics[key], key
+    assert sampler.rows[1]["overlap_3d_pct"] > sampler.rows[2]["overlap_3d_pct"]

@@ -6,6 +6,11 @@ id), so the result does not depend on the order submaps are stored in. Updates a
 while no pose changes: only voxels appended since the last update are transformed and merged
 (they arrived later, so they never displace an existing voxel's first observer). A pose change
 rebuilds that submap's world keys and the merged set.
+
+Each robot's own map (`robot_cloud`, the live evaluator's overlap asks for it every few sim
+seconds, under the edge's lock) is kept the same way: per robot, the voxels of the parts it was
+built from, extended by what those parts appended since and rebuilt only when one of that
+robot's submaps moved.
 """
 
 from __future__ import annotations
@@ -46,6 +51,31 @@ def _first_observed(
     return sorted_keys[first], order[first]
 
 
+@dataclass
+class _RobotMap:
+    """One robot's own map (sorted unique world keys, colours) and, per part it was built
+    from, (pose_version, voxels taken)."""
+
+    taken: dict[SubmapKey, tuple[int, int]]
+    keys: np.ndarray
+    colors: np.ndarray
+    points: np.ndarray | None = None
+
+
+def _insert_new(
+    keys: np.ndarray, values: list[np.ndarray], new_keys: np.ndarray, new_values: list[np.ndarray]
+) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
+    """Sorted `keys` (with per-key `values`) plus the sorted unique `new_keys` they lack; a
+    known key keeps its values (its first observation is older). Also the keys inserted."""
+    pos = np.searchsorted(keys, new_keys)
+    known = np.zeros(new_keys.size, bool)
+    inside = pos < keys.size
+    known[inside] = keys[pos[inside]] == new_keys[inside]
+    new, pos = ~known, pos[~known]
+    merged = [np.insert(v, pos, nv[new], axis=0) for v, nv in zip(values, new_values, strict=True)]
+    return np.insert(keys, pos, new_keys[new]), merged, new_keys[new]
+
+
 class MergedMap:
     """P* in the world frame as sorted voxel keys with colour and first-observer robot."""
 
@@ -60,6 +90,7 @@ class MergedMap:
         self.version = 0  # bumps whenever the merged set changes
         # keys the last update inserted; None after a rebuild (voxels may have been removed)
         self.added_keys: np.ndarray | None = np.zeros(0, np.int64)
+        self._robot_maps: dict[int, _RobotMap] = {}
 
     # -- update ----------------------------------------------------------------------------
     def update(self, store: SubmapStore) -> bool:
@@ -113,16 +144,8 @@ class MergedMap:
         self, keys: np.ndarray, colors: np.ndarray, ticks: np.ndarray, robots: np.ndarray
     ) -> None:
         keys, idx = _first_observed(keys, ticks, robots)
-        colors, robots = colors[idx], robots[idx]
-        pos = np.searchsorted(self.keys, keys)
-        known = np.zeros(keys.size, bool)
-        inside = pos < self.keys.size
-        known[inside] = self.keys[pos[inside]] == keys[inside]
-        new, pos = ~known, pos[~known]
-        self.added_keys = keys[new]
-        self.keys = np.insert(self.keys, pos, keys[new])
-        self.colors = np.insert(self.colors, pos, colors[new], axis=0)
-        self.robot_ids = np.insert(self.robot_ids, pos, robots[new])
+        self.keys, (self.colors, self.robot_ids), self.added_keys = _insert_new(
+            self.keys, [self.colors, self.robot_ids], keys, [colors[idx], robots[idx]])
 
     # -- read ------------------------------------------------------------------------------
     @property
@@ -136,12 +159,47 @@ class MergedMap:
         return int(self.keys.size)
 
     def robot_cloud(self, robot_id: int) -> tuple[np.ndarray, np.ndarray]:
-        """One robot's own map: (N, 3) world voxel centres and (N, 3) colours of its submaps."""
-        parts = [p for (r, _), p in sorted(self._parts.items()) if r == robot_id]
-        if not parts:
-            return np.zeros((0, 3)), np.zeros((0, 3), np.uint8)
-        keys = np.concatenate([p.keys_world for p in parts])
-        ticks = np.concatenate([p.first_tick for p in parts])
-        uniq, idx = _first_observed(keys, ticks, np.zeros(keys.size, np.uint8))
-        colors = np.concatenate([p.colors for p in parts])[idx]
-        return centres(unpack(uniq), self.voxel_m), colors
+        """One robot's own map: (N, 3) world voxel centres and (N, 3) colours of its submaps,
+        each voxel once with the colour of its earliest observation; as of the last update."""
+        parts = {k: p for k, p in self._parts.items() if k[0] == robot_id}
+        cached = self._robot_maps.get(robot_id)
+        if cached is None or any(k in cached.taken and cached.taken[k][0] != p.pose_version
+                                 for k, p in parts.items()):
+            cached = _robot_map(parts)  # first time, or a submap moved: from scratch
+        else:
+            _extend(cached, parts)
+        self._robot_maps[robot_id] = cached
+        if cached.points is None:
+            cached.points = centres(unpack(cached.keys), self.voxel_m)
+        return cached.points, cached.colors
+
+
+def _robot_map(parts: dict[SubmapKey, _WorldPart]) -> _RobotMap:
+    """A robot's own map from all of its parts."""
+    ordered = [parts[k] for k in sorted(parts)]
+    taken = {k: (p.pose_version, p.keys_world.size) for k, p in parts.items()}
+    if not ordered:
+        return _RobotMap(taken, np.zeros(0, np.int64), np.zeros((0, 3), np.uint8))
+    keys = np.concatenate([p.keys_world for p in ordered])
+    ticks = np.concatenate([p.first_tick for p in ordered])
+    uniq, idx = _first_observed(keys, ticks, np.zeros(keys.size, np.uint8))
+    return _RobotMap(taken, uniq, np.concatenate([p.colors for p in ordered])[idx])
+
+
+def _extend(cached: _RobotMap, parts: dict[SubmapKey, _WorldPart]) -> None:
+    """Add the voxels the robot's unmoved parts appended since `cached` was built. They
+    arrived in later plans, so later ticks: a voxel already held keeps its first observer."""
+    new: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    for k in sorted(parts):
+        p = parts[k]
+        start = cached.taken.get(k, (p.pose_version, 0))[1]
+        if p.keys_world.size > start:
+            new.append((p.keys_world[start:], p.first_tick[start:], p.colors[start:]))
+        cached.taken[k] = (p.pose_version, p.keys_world.size)
+    if not new:
+        return
+    keys, ticks, colors = (np.concatenate(arrays) for arrays in zip(*new, strict=True))
+    keys, idx = _first_observed(keys, ticks, np.zeros(keys.size, np.uint8))
+    cached.keys, (cached.colors,), _ = _insert_new(cached.keys, [cached.colors], keys,
+                                                   [colors[idx]])
+    cached.points = None

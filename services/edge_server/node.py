@@ -88,10 +88,17 @@ class EdgeNode:
         self.plan_ms: list[float] = []  # wall time, for the log only
         self.tick_ms: list[float] = []
         self.all_plan_ms: list[float] = []
+        self.cloud_queries = 0
+        self.cloud_lock_s = 0.0  # wall time map/cloud answers held the lock (stalls the clock)
 
     def serve_cloud(self, body: bytes) -> Cloud:
         with self.lock:
-            return cloud_reply(self.planner, self.last_tick, body, self.config.bus.max_array_bytes)
+            t0 = time.perf_counter()  # for the log only
+            reply = cloud_reply(self.planner, self.last_tick, body,
+                                self.config.bus.max_array_bytes)
+            self.cloud_queries += 1
+            self.cloud_lock_s += time.perf_counter() - t0
+            return reply
 
     def serve_inventory(self, _body: bytes) -> Inventory:
         """Every submap merged so far, per robot (issue 7's nothing-lost check)."""
@@ -178,5 +185,6 @@ def main(config: SpacemapConfig) -> None:
                 complete_logged = True
                 log.info("exploration complete at tick %s (all plans: median %.1f ms)",
                          node.planner.judge.complete_tick, statistics.median(node.all_plan_ms))
-    log.info("edge stopped (submap seq gaps: %s)", dict(node.planner.store.seq_gaps))
+    log.info("edge stopped (submap seq gaps: %s; %d map/cloud queries held the lock %.2f s)",
+             dict(node.planner.store.seq_gaps), node.cloud_queries, node.cloud_lock_s)
 

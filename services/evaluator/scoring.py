@@ -37,12 +37,20 @@ class Probe:
     gt: GroundTruth
     ev: EvalConfig
     _surface_tree: cKDTree | None = field(default=None, repr=False)
+    _observable_tree: cKDTree | None = field(default=None, repr=False)
 
     @property
     def surface_tree(self) -> cKDTree:
         if self._surface_tree is None:
             self._surface_tree = cKDTree(self.gt.surface_points_world)
         return self._surface_tree
+
+    @property
+    def observable_tree(self) -> cKDTree:
+        """The observable truth points' KD-tree (the live series' radius look-ups)."""
+        if self._observable_tree is None:
+            self._observable_tree = cKDTree(self.gt.observable_points_world)
+        return self._observable_tree
 
     def surface_distance(self, points_world: np.ndarray) -> np.ndarray:
         """(N,) distance of each point to the nearest static surface sample."""
