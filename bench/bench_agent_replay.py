@@ -49,9 +49,14 @@ from services.common.bus import BusConfig, connect  # noqa: E402
 from services.config import load_config  # noqa: E402
 from services.processes import free_tcp_port  # noqa: E402
 from services.robot_agent import agent as agent_mod  # noqa: E402
+from services.robot_agent import navigation as nav_mod  # noqa: E402
 from services.robot_agent.agent import AgentCore  # noqa: E402
+from services.robot_agent.local_grid import LocalGrid  # noqa: E402
 from services.robot_agent.node import TICKED, _apply  # noqa: E402
 
+_GRID_UPDATE = LocalGrid.update  # unwrapped, so instrumenting twice does not nest timers
+_NAV = {name: getattr(nav_mod, name) for name in ("plan_path", "astar", "path_blocked",
+                                                  "traversable_of")}
 REPO = Path(__file__).resolve().parents[1]
 LOG = "messages.bin"
 _HEAD = struct.Struct("<HI")  # key length, payload length
@@ -124,10 +129,19 @@ def instrument(core: AgentCore, timer: StageTimer) -> None:
                        ("_register", "registration (localization)"),
                        ("_integrate", "submap + grid integration")):
         setattr(core, attr, timer.wrap(name, getattr(core, attr)))
+    # module functions the stages call: the wrapped ones are looked up at call time
     core.nav.step = timer.wrap("navigation (plan + follow)", core.nav.step)
     core.on_grid = timer.wrap("edge grid merge", core.on_grid)
     core.mapper.take_delta = timer.wrap("submap deltas", core.mapper.take_delta)
     agent_mod.filter_mask = timer.wrap("DRF mask (DBSCAN)", agent_mod.filter_mask)
+    reg = core.localizer.registrar
+    for attr in ("_cloud", "align", "insert"):
+        setattr(reg, attr, timer.wrap(f"- registration: {attr.strip('_')}", getattr(reg, attr)))
+    agent_mod.floor_rays = timer.wrap("- integration: free-space rays", agent_mod.floor_rays)
+    core.mapper.integrate = timer.wrap("- integration: submap voxels", core.mapper.integrate)
+    LocalGrid.update = timer.wrap("- integration: grid update", _GRID_UPDATE)
+    for name in ("plan_path", "astar", "path_blocked", "traversable_of"):
+        setattr(nav_mod, name, timer.wrap(f"- navigation: {name}", _NAV[name]))
 
 
 def robot_inputs(keys: Keys, robot: int, path: Path) -> Iterator[tuple[str, str, bytes]]:
