@@ -104,10 +104,8 @@ def astar(
             return None
     wp = W + 2
     free = np.pad(grid, 1).tobytes()  # 1 = traversable, border 0
-    moves = [(dr * wp + dc, step, dr * wp if dr and dc else 0, dc if dr and dc else 0)
-             for dr, dc, step in _MOVES]
     src, dst = (start[0] + 1) * wp + start[1] + 1, (goal[0] + 1) * wp + goal[1] + 1
-    parent = _search(free, wp, moves, src, dst)
+    parent = _search(free, wp, src, dst)
     if parent is None:
         return None
     path = [dst]
@@ -117,20 +115,19 @@ def astar(
     return np.stack(rc, axis=1) - 1
 
 
-def _search(free: bytes, wp: int, moves: list[tuple[int, float, int, int]], src: int,
-            dst: int) -> dict[int, int] | None:
+def _search(free: bytes, wp: int, src: int, dst: int) -> dict[int, int] | None:
     """A* over flat indices of the padded grid; the parent links, or None when unreachable."""
+    # per move: flat offset, cost, the two side cells a diagonal must not cut (0: none), and
+    # its (row, col) change, so the heuristic needs no divmod per neighbour
+    table = [(dr * wp + dc, step, dr * wp if dr and dc else 0, dc if dr and dc else 0, dr, dc)
+             for dr, dc, step in _MOVES]
     gr, gc = divmod(dst, wp)
-    diag = SQRT2 - 1.0
-
-    def octile(p: int) -> float:
-        r, c = divmod(p, wp)
-        dr, dc = abs(r - gr), abs(c - gc)
-        return diag * min(dr, dc) + max(dr, dc)
-
+    diag = SQRT2 - 1.0  # octile distance to the goal: diag · min + max
+    sr, sc = divmod(src, wp)
+    a, b = abs(sr - gr), abs(sc - gc)
     g = {src: 0.0}
     parent: dict[int, int] = {}
-    heap = [(octile(src), 0.0, src)]
+    heap = [(diag * min(a, b) + max(a, b), 0.0, src)]
     closed: set[int] = set()
     push, pop = heapq.heappush, heapq.heappop
     while heap:
@@ -140,7 +137,8 @@ def _search(free: bytes, wp: int, moves: list[tuple[int, float, int, int]], src:
         if node in closed:
             continue
         closed.add(node)
-        for off, step, side_r, side_c in moves:
+        r, c = divmod(node, wp)
+        for off, step, side_r, side_c, dr, dc in table:
             nxt = node + off
             if not free[nxt] or (side_r and not (free[node + side_r] and free[node + side_c])):
                 continue
@@ -148,7 +146,8 @@ def _search(free: bytes, wp: int, moves: list[tuple[int, float, int, int]], src:
             if new < g.get(nxt, math.inf):
                 g[nxt] = new
                 parent[nxt] = node
-                push(heap, (new + octile(nxt), new, nxt))
+                a, b = abs(r + dr - gr), abs(c + dc - gc)
+                push(heap, (new + (diag * min(a, b) + max(a, b)), new, nxt))
     return None
 
 
