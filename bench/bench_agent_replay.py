@@ -223,7 +223,7 @@ def _mismatch(expected: list[bytes], produced: list[bytes], partial: bool) -> st
     return "identical"
 
 
-def report(timer: StageTimer, ticks_per_frame: int) -> None:
+def report(timer: StageTimer) -> None:
     names = sorted({n for t in timer.ticks for n in t}, key=lambda n: -sum(
         t.get(n, 0.0) for t in timer.ticks))
     total = sum(t.get("whole tick (apply + on_odometry)", 0.0) for t in timer.ticks)
@@ -261,7 +261,7 @@ def main() -> None:
         stats = pstats.Stats(prof).strip_dirs()
         stats.sort_stats("cumulative").print_stats(45)
         stats.sort_stats("tottime").print_stats(30)
-    report(timer, 2)
+    report(timer)
     print("\noutputs: " + ", ".join(counts))
     if args.check:
         print("outputs against the mission: " + ", ".join(
