@@ -60,3 +60,16 @@ def test_edge_grid_fills_unknown_but_own_view_wins() -> None:
     grid.merge_edge(OccupancyGrid(tick=1, resolution_m=0.05, origin_x=0.01, origin_y=0.0,
                                   cells=edge_cells))
     assert grid.cells()[own[1, 0], own[1, 1]] == OCCUPIED
+
+
+def test_known_box_covers_exactly_the_edge_grids_known_cells() -> None:
+    """The planner's window comes from this box: it must grow to the edge grid's known cells
+    (found in the pasted window only), not to the whole pasted grid."""
+    grid = LocalGrid.centred(0.0, 0.0, 2.0, 0.1)
+    cells = np.full((10, 12), -1, np.int8)
+    cells[3, 4], cells[7, 9] = 0, 100
+    grid.merge_edge(OccupancyGrid(tick=0, origin_x=-1.0, origin_y=-0.5, resolution_m=0.1,
+                                  cells=cells))
+    known = np.argwhere(grid.edge != -1)
+    assert known.tolist() == [[18, 14], [22, 19]]
+    assert (grid.row_lo, grid.row_hi, grid.col_lo, grid.col_hi) == (18, 22, 14, 19)

@@ -66,3 +66,28 @@ def test_keyframe_switches_on_distance_turn_and_age() -> None:
     assert mapper.needs_keyframe(T_from_xyyaw(1.0, 1.0, -0.6), 10)
     assert mapper.needs_keyframe(T_from_xyyaw(1.0, 1.0, 0.0), 50)
     assert mapper.start_keyframe(T_from_xyyaw(2.1, 1.0, 0.0), 10).submap_id == 1
+
+
+def test_frames_added_one_by_one_equal_one_batch() -> None:
+    """Growing the sorted voxel arrays frame by frame (new voxels inserted in place) keeps
+    them sorted and sums each voxel as one batch of the same points would."""
+    rng = np.random.default_rng(3)
+    frames = [rng.uniform(-2.0, 2.0, (400, 3)) + rng.uniform(-1, 1, 3) for _ in range(12)]
+    colors = [rng.integers(0, 256, (400, 3)).astype(np.uint8) for _ in frames]
+    incremental, batch = VoxelSubmap(0, np.eye(4), 0), VoxelSubmap(0, np.eye(4), 0)
+    for pts, col in zip(frames, colors, strict=True):
+        incremental.add_points(pts, col, 0.05)
+    batch.add_points(np.concatenate(frames), np.concatenate(colors), 0.05)
+    assert np.all(np.diff(incremental.keys) > 0)
+    assert np.array_equal(incremental.keys, batch.keys)
+    assert np.array_equal(incremental.counts, batch.counts)
+    assert np.allclose(incremental.point_sum, batch.point_sum)
+    assert np.allclose(incremental.color_sum, batch.color_sum)
+    assert incremental.sent_counts.shape == incremental.keys.shape
+
+
+def test_points_beyond_the_int16_range_are_dropped() -> None:
+    sub = VoxelSubmap(0, np.eye(4), 0)
+    pts = np.array([[1.0, 0.0, 0.5], [40.0, 0.0, 0.5], [0.0, -33.0, 0.2]])
+    sub.add_points(pts, np.zeros((3, 3), np.uint8), 0.05)
+    assert len(sub) == 1 and sub.counts.tolist() == [1]

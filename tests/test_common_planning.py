@@ -58,3 +58,53 @@ def test_grid_spec_round_trip() -> None:
     rc = spec.cell_of(xy)
     assert spec.contains(rc).all()
     assert np.allclose(spec.centre_of(rc), xy, atol=0.025 + 1e-9)
+
+
+def _reference_astar(grid: np.ndarray, start: tuple[int, int], goal: tuple[int, int]):
+    """Textbook A* on (row, col) tuples: the path the agent followed before flat indices."""
+    import heapq
+    import math
+
+    H, W = grid.shape
+    octile = lambda a: (math.sqrt(2.0) - 1.0) * min(abs(a[0] - goal[0]), abs(a[1] - goal[1])) \
+        + max(abs(a[0] - goal[0]), abs(a[1] - goal[1]))  # noqa: E731
+    moves = [(-1, 0, 1.0), (1, 0, 1.0), (0, -1, 1.0), (0, 1, 1.0), (-1, -1, math.sqrt(2.0)),
+             (-1, 1, math.sqrt(2.0)), (1, -1, math.sqrt(2.0)), (1, 1, math.sqrt(2.0))]
+    g, parent, heap, closed = {start: 0.0}, {}, [(octile(start), 0.0, start)], set()
+    while heap:
+        _, cost, node = heapq.heappop(heap)
+        if node == goal:
+            path = [goal]
+            while path[-1] in parent:
+                path.append(parent[path[-1]])
+            return np.array(path[::-1])
+        if node in closed:
+            continue
+        closed.add(node)
+        for dr, dc, step in moves:
+            nr, nc = node[0] + dr, node[1] + dc
+            if not (0 <= nr < H and 0 <= nc < W) or not grid[nr, nc]:
+                continue
+            if dr and dc and not (grid[nr, node[1]] and grid[node[0], nc]):
+                continue
+            if cost + step < g.get((nr, nc), math.inf):
+                g[(nr, nc)], parent[(nr, nc)] = cost + step, node
+                heapq.heappush(heap, (cost + step + octile((nr, nc)), cost + step, (nr, nc)))
+    return None
+
+
+def test_astar_takes_the_same_path_as_textbook_astar() -> None:
+    """Not just as short: equal-cost paths abound on a grid, and the one taken (ties broken
+    by row, then column) decides where the robot drives, so a faster A* must keep it."""
+    rng = np.random.default_rng(11)
+    for _ in range(150):
+        H, W = (int(v) for v in rng.integers(2, 60, 2))
+        grid = rng.random((H, W)) > rng.uniform(0.05, 0.4)
+        cells = np.argwhere(grid)
+        if len(cells) == 0:
+            continue
+        a, b = (tuple(int(v) for v in cells[i]) for i in rng.integers(len(cells), size=2))
+        ref, got = _reference_astar(grid, a, b), astar(grid, a, b)
+        assert (ref is None) == (got is None)
+        if ref is not None:
+            assert np.array_equal(ref, got) and got.dtype == np.int64

@@ -91,49 +91,64 @@ def distance_field(traversable: np.ndarray, start_rc: tuple[int, int]) -> np.nda
 def astar(
     traversable: np.ndarray, start_rc: tuple[int, int], goal_rc: tuple[int, int]
 ) -> np.ndarray | None:
-    """Shortest 8-connected path as (K, 2) int64 (row, col) including both ends, or None."""
+    """Shortest 8-connected path as (K, 2) int64 (row, col) including both ends, or None.
+
+    Nodes are flat indices into the grid padded by one blocked cell, so a move needs no bounds
+    check and reads one byte. A flat index orders like its (row, col), so heap ties break as
+    they would on (row, col) tuples: the same path whatever the representation."""
     grid = np.asarray(traversable, dtype=bool)
     H, W = grid.shape
     start, goal = (int(start_rc[0]), int(start_rc[1])), (int(goal_rc[0]), int(goal_rc[1]))
     for r, c in (start, goal):
         if not (0 <= r < H and 0 <= c < W) or not grid[r, c]:
             return None
-    g = {start: 0.0}
-    parent: dict[tuple[int, int], tuple[int, int]] = {}
-    heap = [(_octile(start, goal), 0.0, start)]
-    closed: set[tuple[int, int]] = set()
+    wp = W + 2
+    free = np.pad(grid, 1).tobytes()  # 1 = traversable, border 0
+    src, dst = (start[0] + 1) * wp + start[1] + 1, (goal[0] + 1) * wp + goal[1] + 1
+    parent = _search(free, wp, src, dst)
+    if parent is None:
+        return None
+    path = [dst]
+    while path[-1] in parent:
+        path.append(parent[path[-1]])
+    rc = np.divmod(np.array(path[::-1], dtype=np.int64), wp)
+    return np.stack(rc, axis=1) - 1
+
+
+def _search(free: bytes, wp: int, src: int, dst: int) -> dict[int, int] | None:
+    """A* over flat indices of the padded grid; the parent links, or None when unreachable."""
+    # per move: flat offset, cost, the two side cells a diagonal must not cut (0: none), and
+    # its (row, col) change, so the heuristic needs no divmod per neighbour
+    table = [(dr * wp + dc, step, dr * wp if dr and dc else 0, dc if dr and dc else 0, dr, dc)
+             for dr, dc, step in _MOVES]
+    gr, gc = divmod(dst, wp)
+    diag = SQRT2 - 1.0  # octile distance to the goal: diag · min + max
+    sr, sc = divmod(src, wp)
+    a, b = abs(sr - gr), abs(sc - gc)
+    g = {src: 0.0}
+    parent: dict[int, int] = {}
+    heap = [(diag * min(a, b) + max(a, b), 0.0, src)]
+    closed: set[int] = set()
+    push, pop = heapq.heappush, heapq.heappop
     while heap:
-        _, cost, node = heapq.heappop(heap)
-        if node == goal:
-            return _walk_back(parent, goal)
+        _, cost, node = pop(heap)
+        if node == dst:
+            return parent
         if node in closed:
             continue
         closed.add(node)
-        r, c = node
-        for dr, dc, step in _MOVES:
-            nr, nc = r + dr, c + dc
-            if not (0 <= nr < H and 0 <= nc < W) or not grid[nr, nc]:
-                continue
-            if dr and dc and not (grid[nr, c] and grid[r, nc]):
+        r, c = divmod(node, wp)
+        for off, step, side_r, side_c, dr, dc in table:
+            nxt = node + off
+            if not free[nxt] or (side_r and not (free[node + side_r] and free[node + side_c])):
                 continue
             new = cost + step
-            if new < g.get((nr, nc), math.inf):
-                g[(nr, nc)] = new
-                parent[(nr, nc)] = node
-                heapq.heappush(heap, (new + _octile((nr, nc), goal), new, (nr, nc)))
+            if new < g.get(nxt, math.inf):
+                g[nxt] = new
+                parent[nxt] = node
+                a, b = abs(r + dr - gr), abs(c + dc - gc)
+                push(heap, (new + (diag * min(a, b) + max(a, b)), new, nxt))
     return None
-
-
-def _octile(a: tuple[int, int], b: tuple[int, int]) -> float:
-    dr, dc = abs(a[0] - b[0]), abs(a[1] - b[1])
-    return (SQRT2 - 1.0) * min(dr, dc) + max(dr, dc)
-
-
-def _walk_back(parent: dict[tuple[int, int], tuple[int, int]], goal: tuple[int, int]) -> np.ndarray:
-    path = [goal]
-    while path[-1] in parent:
-        path.append(parent[path[-1]])
-    return np.array(path[::-1], dtype=np.int64)
 
 
 def path_length(path_rc: np.ndarray) -> float:

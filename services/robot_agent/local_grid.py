@@ -83,7 +83,9 @@ class LocalGrid:
 
     def _flat(self, xy_world: np.ndarray) -> np.ndarray:
         rc = self.spec.cell_of(xy_world)
-        rc = rc[self.spec.contains(rc)]
+        inside = self.spec.contains(rc)
+        if not inside.all():  # rare (50 m grid): skip the copy
+            rc = rc[inside]
         self._extend(rc)
         return rc[:, 0] * self.spec.width + rc[:, 1]  # duplicates are fine: a[i] += x adds once
 
@@ -99,9 +101,9 @@ class LocalGrid:
         free, occ = self._flat(free_xy_world), self._flat(occupied_xy_world)
         lo[free] += _MISS
         lo[occ] += _HIT
-        for touched in (free, occ):
-            lo[touched] = np.clip(lo[touched], _LO, _HI)
-            seen[touched] = True
+        touched = np.concatenate([free, occ])  # clipping is idempotent: one pass for both
+        lo[touched] = np.clip(lo[touched], _LO, _HI)
+        seen[touched] = True
 
     def merge_edge(self, grid: OccupancyGrid) -> None:
         """Replace the edge layer with the edge's latest merged grid."""
@@ -112,24 +114,36 @@ class LocalGrid:
         aligned = abs(src.resolution_m - self.spec.resolution_m) < 1e-9 and np.allclose(
             off_cells, np.round(off_cells), atol=1e-6
         )
+        window = (slice(0, 0), slice(0, 0))
         if aligned:
-            self._paste(grid.cells, np.round(off_cells).astype(np.int64))
+            window = self._paste(grid.cells, np.round(off_cells).astype(np.int64))
         else:  # resample by cell centres (nearest)
             rc_src = np.argwhere(grid.cells != UNKNOWN)
             rc = self.spec.cell_of(src.centre_of(rc_src))
             ok = self.spec.contains(rc)
             self.edge[rc[ok, 0], rc[ok, 1]] = grid.cells[rc_src[ok, 0], rc_src[ok, 1]]
-        known = np.argwhere(self.edge != UNKNOWN)
-        if known.size:
-            self._extend(np.array([known.min(axis=0), known.max(axis=0)]))
+            window = (slice(0, self.spec.height), slice(0, self.spec.width))
+        self._extend_known(*window)
 
-    def _paste(self, cells: np.ndarray, off_rc: np.ndarray) -> None:
+    def _extend_known(self, rows: slice, cols: slice) -> None:
+        """Grow the known box by the edge layer's known cells, all inside rows × cols (the
+        pasted window: scanning the whole 50 m grid cost more than the paste)."""
+        known = self.edge[rows, cols] != UNKNOWN
+        r, c = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
+        if r.size:
+            r0, c0 = rows.start, cols.start
+            self._extend(np.array([[r0 + r[0], c0 + c[0]], [r0 + r[-1], c0 + c[-1]]]))
+
+    def _paste(self, cells: np.ndarray, off_rc: np.ndarray) -> tuple[slice, slice]:
+        """Copy `cells` in at row/col offset `off_rc`; the window of the grid written."""
         h, w = cells.shape
         r0, c0 = int(off_rc[0]), int(off_rc[1])
         dr0, dc0 = max(0, r0), max(0, c0)
         dr1, dc1 = min(self.spec.height, r0 + h), min(self.spec.width, c0 + w)
         if dr1 > dr0 and dc1 > dc0:
             self.edge[dr0:dr1, dc0:dc1] = cells[dr0 - r0 : dr1 - r0, dc0 - c0 : dc1 - c0]
+            return slice(dr0, dr1), slice(dc0, dc1)
+        return slice(0, 0), slice(0, 0)
 
     def cells(self, rows: slice = slice(None), cols: slice = slice(None)) -> np.ndarray:
         """(H, W) int8 combined grid (or a window of it): -1 unknown, 0 free, 100 occupied."""

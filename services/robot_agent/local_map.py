@@ -65,8 +65,10 @@ class VoxelSubmap:
         return int(self.keys.size)
 
     def add_points(self, points_submap: np.ndarray, colors: np.ndarray, voxel_m: float) -> None:
-        keep = np.all(np.abs(points_submap) * 1000.0 < _INT16_MAX_MM, axis=1)
-        points_submap, colors = points_submap[keep], colors[keep]
+        inside = np.abs(points_submap) * 1000.0 < _INT16_MAX_MM
+        if not inside.all():  # rare; a per-row all() costs more than the rest of the frame
+            keep = inside.all(axis=1)
+            points_submap, colors = points_submap[keep], colors[keep]
         if points_submap.shape[0] == 0:
             return
         keys = voxels.pack(voxels.voxel_indices(points_submap, voxel_m))
@@ -76,33 +78,41 @@ class VoxelSubmap:
         )
         pt_sum = np.stack([np.bincount(inverse, weights=points_submap[:, d], minlength=uniq.size)
                            for d in range(3)], 1)
-        merged = unique_sorted(np.concatenate([self.keys, uniq]))  # np.union1d is slow
-        if merged.size != self.keys.size:
-            self._grow(merged)
         idx = np.searchsorted(self.keys, uniq)
+        known = idx < self.keys.size
+        known[known] = self.keys[idx[known]] == uniq[known]
+        if not known.all():
+            self._grow(uniq[~known], idx[~known])
+            idx = np.searchsorted(self.keys, uniq)
         self.counts[idx] += counts
         self.color_sum[idx] += col_sum
         self.point_sum[idx] += pt_sum
 
-    def _grow(self, merged: np.ndarray) -> None:
-        old = np.searchsorted(merged, self.keys)
-        n = merged.size
+    def _grow(self, new_keys: np.ndarray, at: np.ndarray) -> None:
+        """Insert sorted `new_keys` before the old positions `at` (no re-sort of the map)."""
+        n = self.keys.size + new_keys.size
+        old = np.ones(n, bool)
+        old[at + np.arange(new_keys.size)] = False
 
         def spread(a: np.ndarray) -> np.ndarray:
             out = np.zeros((n, *a.shape[1:]), a.dtype)
             out[old] = a
             return out
 
+        keys = spread(self.keys)
+        keys[~old] = new_keys
         self.color_sum, self.counts = spread(self.color_sum), spread(self.counts)
         self.point_sum = spread(self.point_sum)
         self.sent_counts, self.sent_colors = spread(self.sent_counts), spread(self.sent_colors)
-        self.keys = merged
+        self.keys = keys
 
     def add_free(self, free_xy_submap: np.ndarray, cell_m: float) -> None:
         if free_xy_submap.shape[0] == 0 or self.free_seen is None:
             return
         ij = np.floor(free_xy_submap / cell_m).astype(np.int64) + _FREE_HALF
-        ij = ij[np.all((ij >= 0) & (ij < 2 * _FREE_HALF), axis=1)]
+        inside = (ij >= 0) & (ij < 2 * _FREE_HALF)
+        if not inside.all():
+            ij = ij[inside.all(axis=1)]
         ij = ij[~self.free_seen[ij[:, 0], ij[:, 1]]]
         if ij.shape[0]:
             flat = unique_sorted(ij[:, 0] * (2 * _FREE_HALF) + ij[:, 1])

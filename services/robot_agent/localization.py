@@ -31,6 +31,7 @@ from services.robot_agent.drift_filter import (
     measurement_cov,
     predict,
 )
+from services.robot_agent.voxel_map import LazyLruVoxelMap
 
 
 @dataclass(frozen=True)
@@ -77,8 +78,7 @@ class FrameRegistrar:
 
     def __init__(self, params: RegistrationParams) -> None:
         self.params = params
-        self.voxelmap = small_gicp.GaussianVoxelMap(params.map_voxel_m)
-        self.voxelmap.set_lru(params.map_horizon, 10)
+        self.voxelmap = LazyLruVoxelMap(params.map_voxel_m, params.map_horizon)
         self.n_inserted = 0
         self.T_odom_accepted: np.ndarray | None = None  # odometry at the last accepted one
         self.n_accepted = 0
