@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from schemas import DecodeError, decode, encode
 from schemas.keys import Keys, role_keys
 from services.common.access import (
     DICTIONARY,
@@ -18,6 +19,7 @@ from services.common.access import (
     load_credential,
     make_credentials,
 )
+from tests.fuzz import bad_payloads, templates
 
 ROBOTS = 3
 KEYS = Keys("spacemap")
@@ -124,3 +126,17 @@ def test_credentials(tmp_path: Path) -> None:
     again = make_credentials(tmp_path / "d", robots=2)
     assert load_credential(tmp_path / "d", again[0]).password != load_credential(
         tmp_path / "c", again[0]).password
+
+
+@pytest.mark.parametrize("topic", ["pose", "cmd_vel", "goal_status", "submap"])
+def test_fuzz_payloads_are_all_rejected(topic: str) -> None:
+    """The fuzz test's payloads (tests/fuzz.py): each one fails decoding with a DecodeError
+    of a known reason, so the mission test may count every one as a drop."""
+    template = templates(0)[topic]
+    payloads = bad_payloads(template, seed=1)
+    assert len(payloads) >= 12
+    for what, payload in payloads:
+        with pytest.raises(DecodeError):
+            decode(payload, type(template))
+        assert what
+    decode(encode(template), type(template))  # the template itself is valid

@@ -256,6 +256,9 @@ class Bus:
         raise TimeoutError(f"no reply on {key} within {timeout} s")
 
     def close(self) -> None:
+        if self.dropped:  # the count behind the log-once warnings, for the record
+            log.warning("dropped %d bad messages in all: %s", self.dropped.total(),
+                        json.dumps(dict(sorted(self.dropped.items()))))
         for handle in reversed(self._handles):
             undeclare = getattr(handle, "undeclare", None)
             if undeclare is not None:
