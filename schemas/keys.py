@@ -98,3 +98,60 @@ class Keys:
         parts = key.split("/")
         i = parts.index("alive")
         return parts[i + 1], parts[i + 2]
+
+
+@dataclass(frozen=True)
+class RoleKeys:
+    """The keys one process may use, by action: the source of the router's access control
+    (services/common/access.py). Wildcards are written exactly as the services declare them."""
+
+    publish: tuple[str, ...] = ()
+    subscribe: tuple[str, ...] = ()
+    serve: tuple[str, ...] = ()  # queryables it declares and answers
+    query: tuple[str, ...] = ()  # queryables it asks
+    token: tuple[str, ...] = ()  # its own liveliness token
+
+
+def role_keys(keys: Keys, role: str, ident: int, robots: int) -> RoleKeys:
+    """Which keys process (`role`, `ident`) of a mission with `robots` robots may use: the
+    key table of ARCHITECTURE.md, one home. The tools (`health`, `inventory`) run as
+    `monitor`; every role may also read liveliness (`alive/**`)."""
+    ids = range(robots)
+    token = (keys.alive(role, ident),)
+    if role == "sim":
+        return RoleKeys(
+            publish=(keys.clock(), *(f(i) for i in ids for f in (keys.gt_pose, keys.rgbd,
+                                                                  keys.odom))),
+            subscribe=(keys.any_robot("cmd_vel"), keys.edge_ack(), keys.map_frontiers()),
+            token=token,
+        )
+    if role == "edge":
+        return RoleKeys(
+            publish=(keys.map_grid(), keys.map_frontiers(), keys.edge_ack(),
+                     *(f(i) for i in ids for f in (keys.goal, keys.correction))),
+            subscribe=(keys.clock(), *(keys.any_robot(t) for t in ("submap", "pose",
+                                                                    "goal_status"))),
+            serve=(keys.map_cloud(), keys.map_robot_grid(), keys.map_inventory()),
+            token=token,
+        )
+    if role == "agent":
+        if not 0 <= ident < robots:
+            raise ValueError(f"agent {ident} is not one of {robots} robots")
+        r = ident
+        return RoleKeys(
+            publish=(keys.pose(r), keys.submap(r), keys.cmd_vel(r), keys.goal_status(r)),
+            subscribe=(keys.rgbd(r), keys.odom(r), keys.goal(r), keys.correction(r),
+                       keys.map_grid(), keys.any_robot("pose")),
+            serve=(keys.inventory(r),),
+            token=token,
+        )
+    if role == "monitor":  # the launcher's recorder and sampler, and the CLI tools
+        return RoleKeys(
+            subscribe=(keys.clock(), keys.map_grid(), keys.map_frontiers(), keys.gt_pose("*"),
+                       *(keys.any_robot(t) for t in ("pose", "goal", "goal_status", "submap",
+                                                     "cmd_vel"))),
+            query=(keys.map_cloud(), keys.map_robot_grid(), keys.map_inventory(),
+                   keys.inventory("*")),
+            token=token,
+        )
+    raise ValueError(f"role {role!r} has no keys of its own")

@@ -64,14 +64,32 @@ def router(
     lease: Annotated[
         float, typer.Option("--lease", help="seconds before a silent peer is gone")
     ] = 10.0,
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
     log_level: LogOpt = "INFO",
 ) -> None:
-    """Run the zenoh router (mode router)."""
+    """Run the zenoh router (mode router); with bus.credentials, authenticated and with
+    access control (bus.prefix names the keys)."""
     from services.common.router import run_router
     from services.common.signals import stop_on_signals
 
     _setup_logging(log_level)
-    run_router(listen or ["tcp/0.0.0.0:7447"], stop_on_signals(), lease)
+    bus = service_config(config, None, set_).bus
+    run_router(listen or ["tcp/0.0.0.0:7447"], stop_on_signals(), lease,
+               credentials=bus.credentials, prefix=bus.prefix)
+
+
+@app.command()
+def credentials(
+    out: Annotated[Path, typer.Option("--out", help="folder to write (mode 0700)")],
+    robots: Annotated[int, typer.Option("--robots", min=1, help="agents in the fleet")] = 3,
+) -> None:
+    """Create a login per process (sim, edge, monitor, agent-0..N-1) and the router's
+    dictionary; point every service's bus.credentials at the folder."""
+    from services.common.access import make_credentials
+
+    users = make_credentials(out, robots)
+    typer.echo(f"credentials for {', '.join(users)} in {out}")
 
 
 @app.command()
@@ -332,6 +350,8 @@ def health(
     role: Annotated[str, typer.Option("--role", help="router|sim|edge|agent|monitor")],
     ident: Annotated[str, typer.Option("--id", help="process id (robot id for agents)")] = "0",
     timeout: Annotated[float, typer.Option("--timeout", help="seconds")] = 3.0,
+    login_as: Annotated[str, typer.Option(
+        "--as", help="user to log in as when bus.credentials is set")] = "monitor",
     config: ConfigOpt = None,
     connect: ConnectOpt = None,
     set_: SetOpt = None,
@@ -340,7 +360,7 @@ def health(
     from services.common.health import is_alive
 
     cfg = service_config(config, connect, set_)
-    if not is_alive(cfg.bus, role, ident, timeout):
+    if not is_alive(cfg.bus, role, ident, timeout, login_as):
         typer.echo(f"{role}/{ident}: not alive on {cfg.bus.connect}", err=True)
         raise typer.Exit(1)
     typer.echo(f"{role}/{ident}: alive")

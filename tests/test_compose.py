@@ -102,3 +102,21 @@ def test_readme_documents_separate_hosts() -> None:
     assert any(c.startswith("agent") for c in commands), "README shows no `spacemap agent`"
     for line in commands:
         parse_cli(shlex.split(line.split("#")[0]))
+
+
+def test_logins() -> None:
+    """Every service logs in from the credentials volume, made for the compose fleet before
+    the router starts; health checks log in as the process they probe."""
+    made = parse_cli(SERVICES["credentials"]["command"])
+    assert made.params["out"].as_posix() == "/credentials"
+    assert made.params["robots"] == int(SERVICES["sim"]["environment"]["SPACEMAP__SIM__ROBOTS"])
+    assert SERVICES["router"]["depends_on"]["credentials"] == {
+        "condition": "service_completed_successfully"}
+    for name, service in SERVICES.items():
+        assert service["environment"]["SPACEMAP__BUS__CREDENTIALS"] == "/credentials", name
+        assert "credentials:/credentials" in service["volumes"], name
+        test = service.get("healthcheck", {}).get("test", [])
+        if "--as" in test:
+            role, ident = test[test.index("--role") + 1], test[test.index("--id") + 1]
+            assert test[test.index("--as") + 1] == (f"agent-{ident}" if role == "agent"
+                                                    else role), name

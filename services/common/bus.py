@@ -16,7 +16,7 @@ from collections import Counter
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import zenoh
 from pydantic import BaseModel, ConfigDict, Field
@@ -24,6 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from schemas import DecodeError, Keys, decode, encode
 from schemas.arrays import DEFAULT_MAX_ARRAY_BYTES
 from schemas.messages import Message
+from services.common.access import load_credential
 
 log = logging.getLogger(__name__)
 
@@ -43,6 +44,11 @@ class BusConfig(BaseModel):
     lease_s: float = Field(
         default=10.0, gt=0, description="a silent peer is declared gone after this long"
     )
+    credentials: str | None = Field(
+        default=None,
+        description="folder from `spacemap credentials`: each process logs in as its own "
+        "user from it (the router reads its dictionary); None: no authentication",
+    )
 
 
 def zenoh_config(
@@ -52,8 +58,12 @@ def zenoh_config(
     shared_memory: bool = False,
     connect_timeout_s: float = 30.0,
     lease_s: float = 10.0,
+    login: tuple[str, str] | None = None,
+    dictionary_file: str | None = None,
+    access_control: dict[str, Any] | None = None,
 ) -> zenoh.Config:
-    """The one set of session flags every spacemap process uses."""
+    """The one set of session flags every spacemap process uses. `login` (user, password):
+    a client's identity; `dictionary_file` and `access_control`: the router's."""
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("scouting/multicast/enabled", "false")
@@ -66,12 +76,30 @@ def zenoh_config(
         conf.insert_json5("connect/exit_on_failure", "true")
     if listen is not None:
         conf.insert_json5("listen/endpoints", json.dumps(listen))
+    if login is not None:
+        conf.insert_json5("transport/auth/usrpwd/user", json.dumps(login[0]))
+        conf.insert_json5("transport/auth/usrpwd/password", json.dumps(login[1]))
+    if dictionary_file is not None:
+        conf.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(dictionary_file))
+    if access_control is not None:
+        conf.insert_json5("access_control", json.dumps(access_control))
     return conf
 
 
+def login_for(config: BusConfig, identity: str | None) -> tuple[str, str] | None:
+    """(user, password) of `identity` from the config's credentials folder, if it has one."""
+    if config.credentials is None:
+        return None
+    if identity is None:
+        raise ValueError("bus.credentials is set but this process has no identity")
+    cred = load_credential(config.credentials, identity)
+    return cred.user, cred.password
+
+
 @contextmanager
-def open_session(config: BusConfig) -> Iterator[zenoh.Session]:
-    """A client session connected to the router of `config`."""
+def open_session(config: BusConfig, identity: str | None = None) -> Iterator[zenoh.Session]:
+    """A client session connected to the router of `config`, logged in as `identity`
+    (services.common.access.identity) when the config names a credentials folder."""
     session = zenoh.open(
         zenoh_config(
             "client",
@@ -79,6 +107,7 @@ def open_session(config: BusConfig) -> Iterator[zenoh.Session]:
             shared_memory=config.shared_memory,
             connect_timeout_s=config.connect_timeout_s,
             lease_s=config.lease_s,
+            login=login_for(config, identity),
         )
     )
     try:
@@ -227,6 +256,9 @@ class Bus:
         raise TimeoutError(f"no reply on {key} within {timeout} s")
 
     def close(self) -> None:
+        if self.dropped:  # the count behind the log-once warnings, for the record
+            log.warning("dropped %d bad messages in all: %s", self.dropped.total(),
+                        json.dumps(dict(sorted(self.dropped.items()))))
         for handle in reversed(self._handles):
             undeclare = getattr(handle, "undeclare", None)
             if undeclare is not None:
@@ -235,9 +267,9 @@ class Bus:
 
 
 @contextmanager
-def connect(config: BusConfig) -> Iterator[Bus]:
-    """Open a session to the router and wrap it in a Bus."""
-    with open_session(config) as session:
+def connect(config: BusConfig, identity: str | None = None) -> Iterator[Bus]:
+    """Open a session to the router (as `identity`) and wrap it in a Bus."""
+    with open_session(config, identity) as session:
         bus = Bus(session, config)
         try:
             yield bus

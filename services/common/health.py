@@ -8,11 +8,13 @@ from schemas import Keys
 from services.common.bus import BusConfig, open_session
 
 
-def is_alive(config: BusConfig, role: str, ident: int | str = 0, timeout_s: float = 3.0) -> bool:
-    """True when `alive/{role}/{ident}` is declared; for the router, when it accepts a session."""
+def is_alive(config: BusConfig, role: str, ident: int | str = 0, timeout_s: float = 3.0,
+             login_as: str = "monitor") -> bool:
+    """True when `alive/{role}/{ident}` is declared; for the router, when it accepts a session
+    (with credentials: logs in as `login_as`, any user may read liveliness)."""
     probe = config.model_copy(update={"connect_timeout_s": timeout_s})
     try:
-        with open_session(probe) as session:
+        with open_session(probe, login_as) as session:
             if role == "router":
                 return True
             key = Keys(config.prefix).alive(role, ident)

@@ -7,6 +7,7 @@ from typing import Any
 
 from schemas import DecodeError
 from schemas.messages import Inventory, SubmapInfo
+from services.common.access import identity
 from services.common.bus import Bus, BusConfig, connect
 
 log = logging.getLogger(__name__)
@@ -34,7 +35,7 @@ def query_inventory(bus: Bus, key: str, timeout_s: float) -> Inventory | None:
 def collect_inventories(config: BusConfig, robots: int, timeout_s: float) -> dict[str, Any]:
     """{"edge": {robot: {"epoch/submap": voxels}}, "agents": {robot: {"epoch/submap": voxels}}}
     (None where a process did not answer)."""
-    with connect(config) as bus:
+    with connect(config, identity("monitor")) as bus:
         edge = as_json(query_inventory(bus, bus.keys.map_inventory(), timeout_s))
         agents = {}
         for r in range(robots):

@@ -28,6 +28,7 @@ from schemas.messages import (
     RobotPose,
     Submap,
 )
+from services.common.access import identity
 from services.common.bus import Bus, Inbound, Presence, connect
 from services.common.inventory import inventory_of
 from services.common.signals import stop_on_signals
@@ -168,7 +169,7 @@ class EdgeNode:
 def main(config: SpacemapConfig) -> None:
     """Run the edge server until SIGTERM or SIGINT."""
     stop = stop_on_signals()
-    with connect(config.bus) as bus:
+    with connect(config.bus, identity("edge")) as bus:
         node = EdgeNode(bus, config)
         _subscribe(bus)
         bus.serve(bus.keys.map_cloud(), node.serve_cloud)

@@ -5,7 +5,9 @@ from __future__ import annotations
 import json
 import logging
 import resource
+import shutil
 import subprocess
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,6 +15,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
+from services.common.access import identity, make_credentials
 from services.common.bus import connect
 from services.config import SpacemapConfig, write_config
 from services.evaluator.evaluate import probe_for
@@ -35,9 +38,9 @@ class RunResult:
     exit_codes: dict[str, int]
 
 
-def _with_endpoint(config: SpacemapConfig, endpoint: str) -> SpacemapConfig:
+def _with_bus(config: SpacemapConfig, **fields: object) -> SpacemapConfig:
     tree = config.model_dump(mode="json")
-    tree["bus"]["connect"] = endpoint
+    tree["bus"].update(fields)
     return SpacemapConfig.model_validate(tree)
 
 
@@ -66,15 +69,24 @@ def run_mission(
     `log_level`: the services' too (DEBUG gives each agent's per-frame registration trace)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     group = ProcessGroup(out_dir / "logs")
+    secrets_dir: str | None = None
     try:
         if router_endpoint is None:
+            # our own router: fresh logins for this run only, kept out of the run folder
+            secrets_dir = tempfile.mkdtemp(prefix="spacemap-credentials-")
+            make_credentials(Path(secrets_dir), config.sim.robots)
+            config = _with_bus(config, credentials=secrets_dir)
             router_endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-            group.start("router", spacemap_command("router", "--listen", router_endpoint))
-        config = _with_endpoint(config, router_endpoint)
+            group.start("router", spacemap_command(
+                "router", "--listen", router_endpoint, "--set", f"bus.credentials={secrets_dir}",
+                "--set", f"bus.prefix={config.bus.prefix}"))
+        config = _with_bus(config, connect=router_endpoint)
         metrics = _record(config, out_dir, group, stall_timeout_s, console, sample_every_s,
                           log_level)
     finally:
         codes = group.stop(order=["sim", "edge"])
+        if secrets_dir is not None:
+            shutil.rmtree(secrets_dir, ignore_errors=True)
     return RunResult(out_dir, metrics, codes)
 
 
@@ -104,7 +116,7 @@ def _record(
     wall_start = time.monotonic()
     probe = probe_for(config.sim)  # before the services start: a cold ground truth takes seconds
     write_config(config, out_dir / "config.yaml")
-    with connect(config.bus) as bus:
+    with connect(config.bus, identity("monitor")) as bus:
         monitor = Monitor(bus, config.sim.robots)
         sampler = CoverageSampler(monitor, probe, sample_every_s, config.sim.tick_s)
         if group is not None:

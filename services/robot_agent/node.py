@@ -15,6 +15,7 @@ from schemas.messages import (
     RgbdFrame,
     RobotPose,
 )
+from services.common.access import identity
 from services.common.bus import Bus, Inbound, Presence, connect
 from services.common.signals import stop_on_signals
 from services.config import SpacemapConfig
@@ -92,7 +93,7 @@ def main(config: SpacemapConfig, robot_id: int) -> None:
     """Run robot `robot_id`'s agent until SIGTERM or SIGINT."""
     stop = stop_on_signals()
     core = AgentCore(config.agent, robot_id, config.sim.tick_s, team_size=config.sim.robots - 1)
-    with connect(config.bus) as bus:
+    with connect(config.bus, identity("agent", robot_id)) as bus:
         lock = threading.Lock()  # the inventory queryable runs on a zenoh thread
         pending: list[Message] = []
         last_tick = [0]

@@ -30,6 +30,7 @@ from schemas.messages import (  # noqa: E402
     Pose2D,
     RgbdFrame,
 )
+from services.common.access import identity  # noqa: E402
 from services.common.bus import Bus, Inbound, Presence, connect  # noqa: E402
 from services.config import SpacemapConfig  # noqa: E402
 from services.simulator.config import SimConfig  # noqa: E402
@@ -275,7 +276,7 @@ def main(config: SpacemapConfig, stop: threading.Event | None = None) -> None:
     stop = stop or threading.Event()
     with _signals_set(stop):
         try:
-            with connect(config.bus) as bus:
+            with connect(config.bus, identity("sim")) as bus:
                 node = SimNode(bus, config.sim, stop)
                 mode = config.sim.realtime
                 log.info(

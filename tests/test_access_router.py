@@ -1,0 +1,148 @@
+"""The generated access control enforced by a real router (`spacemap router`, its own OS
+process, on loopback): every forbidden publish, subscription, queryable and liveliness token
+of every user is refused, every granted one goes through; no login, no session."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from schemas.keys import Keys, role_keys
+from services.common.access import identities, make_credentials
+from services.common.bus import BusConfig, open_session
+from services.processes import ProcessGroup, free_tcp_port, spacemap_command
+from tests.test_access import every_key, matches
+
+pytestmark = pytest.mark.multiprocess
+
+ROBOTS = 2
+KEYS = Keys("spacemap")
+Received = dict[str, list[tuple[str, bytes]]]
+
+
+def wait_until(condition: Callable[[], bool], timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+        time.sleep(0.02)
+
+
+@pytest.fixture(scope="module")
+def router(tmp_path_factory: pytest.TempPathFactory) -> Iterator[BusConfig]:
+    tmp = tmp_path_factory.mktemp("acl")
+    make_credentials(tmp / "cred", ROBOTS)
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    group = ProcessGroup(tmp / "logs")
+    group.start("router", spacemap_command(
+        "router", "--listen", endpoint, "--set", f"bus.credentials={tmp / 'cred'}"))
+    config = BusConfig(connect=endpoint, credentials=str(tmp / "cred"), connect_timeout_s=20)
+    try:
+        with open_session(config, "monitor"):  # the router is up
+            pass
+        yield config
+    finally:
+        group.stop()
+
+
+def grants(user: str):  # noqa: ANN201 - RoleKeys
+    role, ident = identities(ROBOTS)[user]
+    return role_keys(KEYS, role, ident, ROBOTS)
+
+
+def owner(key: str) -> str | None:
+    found = [u for u in identities(ROBOTS) if any(matches(p, key) for p in grants(u).publish)]
+    return found[0] if found else None
+
+
+def test_matrix_on_a_real_router(router: BusConfig) -> None:
+    users = list(identities(ROBOTS))
+    keys = [k for k in every_key(ROBOTS) if "/alive/" not in k]
+    got: Received = {u: [] for u in users}  # through each user's own subscriptions
+    spied: Received = {u: [] for u in users}  # through a `spacemap/**` spy with its login
+    lock = threading.Lock()
+
+    def recorder(into: list[tuple[str, bytes]]) -> zenoh.handlers.Callback:
+        def on_sample(sample: zenoh.Sample) -> None:
+            with lock:
+                into.append((str(sample.key_expr), sample.payload.to_bytes()))
+        return zenoh.handlers.Callback(on_sample, indirect=False)
+
+    with ExitStack() as stack:
+        sessions = {u: stack.enter_context(open_session(router, u)) for u in users}
+        spies = {u: stack.enter_context(open_session(router, u)) for u in users}
+        for user in users:
+            for expr in grants(user).subscribe:
+                sessions[user].declare_subscriber(expr, recorder(got[user]))
+            spies[user].declare_subscriber("spacemap/**", recorder(spied[user]))
+        # a queryable and a token in another's name must not be reachable
+        for user in users:  # only the edge's may answer (the monitor asks, from its session)
+            if user != "monitor":
+                sessions[user].declare_queryable(
+                    KEYS.map_cloud(), lambda q, u=user: q.reply(KEYS.map_cloud(), u.encode()))
+        tokens = [sessions["agent-0"].liveliness().declare_token(KEYS.alive("edge", 0)),
+                  sessions["sim"].liveliness().declare_token(KEYS.alive("agent", 1)),
+                  sessions["agent-1"].liveliness().declare_token(KEYS.alive("agent", 1))]
+        # liveliness declarations settle before the routing of puts matters
+        wait_until(lambda: any(True for _ in sessions["monitor"].liveliness().get(
+            KEYS.alive("agent", 1), timeout=2)), 10, "agent-1's own token")
+
+        forged = 0
+        for user in users:
+            for key in keys:
+                if owner(key) != user:
+                    sessions[user].put(key, f"forged by {user}".encode())
+                    forged += 1
+        for user in users:  # a round trip per sender: its forged puts are routed by now
+            list(sessions[user].liveliness().get(KEYS.alive_all(), timeout=2))
+        owned = [k for k in keys if owner(k) is not None]
+        for key in owned:
+            sessions[owner(key)].put(key, b"owner")
+
+        def owners_arrived() -> bool:
+            with lock:
+                return all((key, b"owner") in got[u] for key in owned for u in users
+                           if any(matches(p, key) for p in grants(u).subscribe))
+        wait_until(owners_arrived, 20, "every owner's put at every granted subscriber")
+
+        with lock:
+            # a session's own puts reach its own subscribers without the router: not counted
+            bad = {u: [m for m in got[u] if m[1] not in (b"owner", f"forged by {u}".encode())]
+                   for u in users}
+            leaked = {u: sorted({k for k, _ in spied[u]
+                                 if not any(matches(p, k) for p in grants(u).subscribe)})
+                      for u in users}
+        assert forged > 100
+        assert all(not v for v in bad.values()), f"forged puts delivered: {bad}"
+        assert all(not v for v in leaked.values()), f"delivered beyond grants: {leaked}"
+
+        replies = {r.ok.payload.to_bytes() for r in sessions["monitor"].get(
+            KEYS.map_cloud(), timeout=2) if r.ok is not None}
+        assert replies == {b"edge"}, f"map/cloud answered by {replies}"
+        alive = {str(r.ok.key_expr) for r in sessions["monitor"].liveliness().get(
+            KEYS.alive_all(), timeout=2) if r.ok is not None}
+        assert alive == {KEYS.alive("agent", 1)}, f"forged liveliness tokens seen: {alive}"
+        del tokens
+
+
+@pytest.mark.parametrize("login", ["none", "wrong password", "unknown user"])
+def test_no_login_no_session(router: BusConfig, login: str, tmp_path: Path) -> None:
+    probe = router.model_copy(update={"connect_timeout_s": 2.0})
+    if login == "none":
+        probe = probe.model_copy(update={"credentials": None})
+    else:
+        other = tmp_path / "other"
+        make_credentials(other, ROBOTS)  # same user names, other passwords
+        if login == "unknown user":
+            (other / "stranger.json").write_text(
+                (other / "sim.json").read_text().replace('"sim"', '"stranger"'))
+        probe = probe.model_copy(update={"credentials": str(other)})
+    user = "stranger" if login == "unknown user" else "agent-0"
+    with pytest.raises(zenoh.ZError), open_session(probe, user) as session:
+        session.put(KEYS.cmd_vel(0), b"x")
