@@ -250,15 +250,27 @@ def eval_(
                                   "metrics_eval.json)")
     ] = None,
     plots: Annotated[bool, typer.Option("--plots", help="also redraw the PNG figures")] = False,
+    explain: Annotated[bool, typer.Option(
+        "--explain", help="only print where each robot's time and distance went")] = False,
     log_level: LogOpt = "WARNING",
 ) -> None:
     """Recompute metrics.json from a finished run folder's files and compare."""
-    from services.evaluator.evaluate import evaluate_run_folder, redraw_plots
+    from services.evaluator.evaluate import (
+        evaluate_run_folder,
+        explain_run_folder,
+        redraw_plots,
+    )
     from services.evaluator.run_files import METRICS, read_json, write_json
 
     _setup_logging(log_level)
     if not (run_dir / "config.yaml").exists():
         raise typer.BadParameter(f"{run_dir} has no config.yaml: not a run folder")
+    if explain:
+        try:
+            typer.echo(explain_run_folder(run_dir), nl=False)
+        except FileNotFoundError as exc:
+            raise typer.BadParameter(str(exc)) from exc
+        return
     metrics = evaluate_run_folder(run_dir)
     write_json(out or run_dir / "metrics_eval.json", metrics)
     if plots:

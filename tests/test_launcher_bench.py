@@ -76,6 +76,10 @@ def test_eval_recomputes_run_metrics(bench_dir: Path) -> None:
     assert result.exit_code == 0, result.output
     assert "(metrics.json:" not in result.output
     assert (run / "metrics_eval.json").exists()
+    explained = CliRunner().invoke(app, ["eval", str(run), "--explain"])
+    assert explained.exit_code == 0, explained.output
+    rows = [line for line in explained.output.splitlines() if line.startswith("| 1 |")]
+    assert "| robot | reached | invalid |" in explained.output and len(rows) == 2
 
 
 def test_eval_notices_a_changed_map(bench_dir: Path) -> None:

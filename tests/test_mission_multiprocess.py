@@ -109,3 +109,7 @@ def test_spacemap_run_writes_a_run_folder_and_repeats_exactly(tmp_path: Path) ->
     for robot in range(2):
         name = f"trajectory_{robot}_gt.tum"
         assert (out / name).read_text() == (tmp_path / "again" / name).read_text()
+    # the goal/status/state log behind `spacemap eval --explain` is as deterministic
+    events = (out / "events.jsonl").read_text()
+    assert events == (tmp_path / "again" / "events.jsonl").read_text()
+    assert '"kind": "goal"' in events and '"kind": "state"' in events

@@ -111,3 +111,19 @@ def redraw_plots(run_dir: Path, metrics: dict[str, Any]) -> None:
     plot_coverage(rf.read_csv(run_dir / rf.TIMESERIES), run_dir / "coverage.png", label)
     plot_map_top(rf.read_ply(run_dir / rf.MERGED_MAP), [xy for _, xy in tracks],
                  np.asarray(frontiers, dtype=np.float64), run_dir / "map_top.png", label)
+
+
+def explain_run_folder(run_dir: Path) -> str:
+    """`spacemap eval --explain`: where each robot's time and distance went (markdown)."""
+    from services.evaluator.explain import explain_events, markdown
+
+    path = run_dir / rf.EVENTS
+    if not path.exists():
+        raise FileNotFoundError(f"{path} missing: the run predates events.jsonl")
+    config = RunConfig.read(run_dir / "config.yaml")
+    live = rf.read_json(run_dir / rf.LIVE)
+    end_tick = round(float(live["sim_time_s"]) / config.sim.tick_s)
+    tracks = load_tracks(run_dir, config.sim.robots)
+    per_robot = explain_events(rf.read_events(path), tracks, end_tick, config.sim.tick_s)
+    return markdown(per_robot)
+

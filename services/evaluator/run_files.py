@@ -99,6 +99,15 @@ def read_json(path: Path) -> dict[str, Any]:
     return json.loads(path.read_text())
 
 
+def write_events(path: Path, events: list[dict[str, Any]]) -> None:
+    """One JSON object per line (robot, tick, kind, ...), in the order given."""
+    path.write_text("".join(json.dumps(e, sort_keys=True) + "\n" for e in events))
+
+
+def read_events(path: Path) -> list[dict[str, Any]]:
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
 def write_csv(path: Path, rows: list[dict[str, Any]], columns: list[str]) -> None:
     """Rows as CSV; floats with 4 decimals, None as an empty cell."""
     with path.open("w", newline="") as f:
@@ -147,3 +156,4 @@ TIMESERIES = "timeseries.csv"
 LIVE = "live.json"  # what only the live run can know: wall time, traffic, completion
 METRICS = "metrics.json"
 FRONTIERS = "frontiers.json"
+EVENTS = "events.jsonl"  # goals, goal statuses, navigation states per robot (explain.py)

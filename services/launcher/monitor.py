@@ -30,6 +30,8 @@ class RobotTrack:
     goals_assigned: int = 0
     goals_reached: int = 0
     goal_statuses: Counter[str] = field(default_factory=Counter)
+    # goals, statuses and navigation state changes with their ticks (events.jsonl)
+    events: list[dict] = field(default_factory=list)
 
 
 @dataclass
@@ -179,13 +181,21 @@ class Monitor:
             t = self.tracks[msg.robot_id]
             t.est_stamps_ns.append(msg.stamp_ns)
             t.est_xyyaw.append((msg.pose_world.x, msg.pose_world.y, msg.pose_world.yaw))
+            if msg.state != t.state:
+                t.events.append({"tick": msg.tick, "kind": "state", "state": msg.state})
             t.state = msg.state
         elif isinstance(msg, m.Goal) and msg.robot_id in self.tracks:
-            self.tracks[msg.robot_id].goals_assigned += 1
+            t = self.tracks[msg.robot_id]
+            t.goals_assigned += not msg.cancel
+            t.events.append({"tick": msg.tick, "kind": "goal", "goal_id": msg.goal_id,
+                             "x": msg.x, "y": msg.y, "frontier_class": msg.frontier_class,
+                             "revenue": msg.revenue, "cancel": msg.cancel})
         elif isinstance(msg, m.GoalStatus) and msg.robot_id in self.tracks:
             t = self.tracks[msg.robot_id]
             t.goal_statuses[msg.status] += 1
             t.goals_reached += msg.status == "reached"
+            t.events.append({"tick": msg.tick, "kind": "status", "goal_id": msg.goal_id,
+                             "status": msg.status, "reason": msg.reason})
 
     def _snapshot(self) -> None:
         assert self.grid is not None

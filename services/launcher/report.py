@@ -15,7 +15,7 @@ import numpy as np
 from schemas import messages as m
 from services.config import SpacemapConfig
 from services.evaluator import run_files as rf
-from services.evaluator.evaluate import evaluate_run_folder, load_tracks
+from services.evaluator.evaluate import evaluate_run_folder, explain_run_folder, load_tracks
 from services.evaluator.plots import plot_coverage, plot_map_top
 from services.evaluator.scoring import Probe, distance_at
 from services.launcher.monitor import Monitor
@@ -60,12 +60,28 @@ def write_run_folder(
     frontiers_xy = _frontiers_xy(monitor.frontiers)
     rf.write_json(out_dir / rf.FRONTIERS, {"xy": frontiers_xy.tolist()})
     rf.write_json(out_dir / rf.LIVE, live)
+    end_tick = round(float(live["sim_time_s"]) / config.sim.tick_s)
+    rf.write_events(out_dir / rf.EVENTS, ordered_events(monitor, end_tick))
     metrics = evaluate_run_folder(out_dir, probe)
     rf.write_json(out_dir / rf.METRICS, metrics)
     write_plots(out_dir, final_cloud.points_world, tracks, frontiers_xy, rows, metrics)
     _write_report(out_dir / "report.md", metrics, monitor, live)
+    with (out_dir / "report.md").open("a") as report:
+        report.write("\n## Where the time went\n\n" + explain_run_folder(out_dir))
     log.info("run folder written: %s", out_dir)
     return metrics
+
+
+_KIND_ORDER = {"status": 0, "goal": 1, "state": 2}
+
+
+def ordered_events(monitor: Monitor, end_tick: int) -> list[dict[str, Any]]:
+    """Every robot's events up to the mission's last tick, in an order that does not depend
+    on arrival: by robot, tick, then a goal's end before the next goal of the same tick."""
+    events = [{"robot": robot, **e} for robot, t in monitor.tracks.items() for e in t.events
+              if e["tick"] <= end_tick]
+    return sorted(events, key=lambda e: (e["robot"], e["tick"], _KIND_ORDER[e["kind"]],
+                                         e.get("goal_id", -1)))
 
 
 def _write_maps(

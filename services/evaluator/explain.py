@@ -1,0 +1,148 @@
+"""Where each robot's time and distance went (issue 12): a pure reading of a run's events.
+
+A run folder's `events.jsonl` holds, per robot and in tick order, the goals the edge sent,
+the statuses the agent reported and the agent's navigation state changes (what the monitor
+saw on the bus). Each goal is given one outcome:
+
+- `reached`, `invalid` (the adaptive validator gave up), `unreachable` (no path): the agent's
+  first terminal status for it;
+- `cancelled`: the edge withdrew it (`Goal.cancel`);
+- `replaced`: the edge sent another goal before it ended (re-assignment churn);
+- `open`: still active when the mission ended.
+
+A goal's span runs from its assignment to that outcome; the robot's distance over the span
+comes from its ground-truth path (the evaluator's, never the agents'). Time without a goal
+is `no goal`. States (`idle` = spinning with no goal, `turning`, `following`) are summed
+from their changes.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+OUTCOMES = ("reached", "invalid", "unreachable", "cancelled", "replaced", "open")
+TERMINAL = ("reached", "invalid", "unreachable")
+
+
+@dataclass
+class Span:
+    """One goal from assignment to outcome."""
+
+    goal_id: int
+    frontier_class: str
+    start_tick: int
+    end_tick: int = -1
+    outcome: str = "open"
+
+
+@dataclass
+class RobotExplain:
+    """A robot's time (s) and distance (m) by goal outcome, goal class and state."""
+
+    goals: Counter[str] = field(default_factory=Counter)  # outcome → count
+    time_s: dict[str, float] = field(default_factory=dict)  # outcome or "no goal" → s
+    distance_m: dict[str, float] = field(default_factory=dict)  # same keys → m
+    class_time_s: dict[str, float] = field(default_factory=dict)  # frontier class → s
+    state_time_s: dict[str, float] = field(default_factory=dict)  # nav state → s
+    total_time_s: float = 0.0
+    total_distance_m: float = 0.0
+
+
+def goal_spans(events: Sequence[dict[str, Any]], end_tick: int) -> list[Span]:
+    """Every goal of one robot's tick-ordered events, with its outcome and end tick."""
+    spans: list[Span] = []
+    current: Span | None = None
+    for ev in events:
+        tick = int(ev["tick"])
+        if ev["kind"] == "goal":
+            if ev.get("cancel"):
+                if current is not None and current.goal_id == ev["goal_id"]:
+                    current.end_tick, current.outcome, current = tick, "cancelled", None
+                continue
+            if current is not None and current.goal_id == ev["goal_id"]:
+                continue  # the same goal re-sent
+            if current is not None:
+                current.end_tick, current.outcome = tick, "replaced"
+            current = Span(int(ev["goal_id"]), str(ev.get("frontier_class", "")), tick)
+            spans.append(current)
+        elif (ev["kind"] == "status" and ev["status"] in TERMINAL and current is not None
+              and current.goal_id == ev["goal_id"]):
+            current.end_tick, current.outcome, current = tick, ev["status"], None
+    if current is not None:
+        current.end_tick = end_tick
+    return spans
+
+
+def path_length(stamps_s: np.ndarray, xy: np.ndarray, t0: float, t1: float) -> float:
+    """Metres driven between sim times t0 and t1 along a sampled path."""
+    if len(xy) < 2 or t1 <= t0:
+        return 0.0
+    seg = np.hypot(*np.diff(xy, axis=0).T)
+    inside = (stamps_s[1:] > t0) & (stamps_s[1:] <= t1)
+    return float(seg[inside].sum())
+
+
+def state_times(events: Sequence[dict[str, Any]], end_tick: int, tick_s: float
+                ) -> dict[str, float]:
+    """Seconds in each navigation state, from the state changes."""
+    out: Counter[str] = Counter()
+    changes = [(int(e["tick"]), str(e["state"])) for e in events if e["kind"] == "state"]
+    for (tick, state), (next_tick, _) in zip(changes, changes[1:] + [(end_tick, "")],
+                                             strict=True):
+        out[state or "unknown"] += max(next_tick - tick, 0) * tick_s
+    return dict(out)
+
+
+def explain_robot(events: Sequence[dict[str, Any]], stamps_s: np.ndarray, xy: np.ndarray,
+                  end_tick: int, tick_s: float) -> RobotExplain:
+    """One robot's breakdown; `stamps_s`, `xy` its true path (N,), (N, 2)."""
+    out = RobotExplain(state_time_s=state_times(events, end_tick, tick_s))
+    out.total_time_s = end_tick * tick_s
+    out.total_distance_m = path_length(stamps_s, xy, -1.0, end_tick * tick_s)
+    time, dist, cls = Counter(), Counter(), Counter()
+    covered = 0.0
+    for span in goal_spans(events, end_tick):
+        t0, t1 = span.start_tick * tick_s, span.end_tick * tick_s
+        out.goals[span.outcome] += 1
+        time[span.outcome] += t1 - t0
+        dist[span.outcome] += path_length(stamps_s, xy, t0, t1)
+        cls[span.frontier_class] += t1 - t0
+        covered += t1 - t0
+    time["no goal"] = max(out.total_time_s - covered, 0.0)
+    dist["no goal"] = max(out.total_distance_m - sum(dist.values()), 0.0)
+    out.time_s, out.distance_m, out.class_time_s = dict(time), dict(dist), dict(cls)
+    return out
+
+
+def markdown(per_robot: dict[int, RobotExplain]) -> str:
+    """Two tables: time / distance by goal outcome, and goals, classes and states."""
+    keys = [*OUTCOMES, "no goal"]
+    head = "| robot | " + " | ".join(keys) + " | total |"
+    lines = ["Time s / distance m by goal outcome (a goal's span: assignment to outcome)", "",
+             head, "|---|" + "---:|" * (len(keys) + 1)]
+    for robot, r in per_robot.items():
+        cells = [f"{r.time_s.get(k, 0.0):.0f} / {r.distance_m.get(k, 0.0):.1f}" for k in keys]
+        lines.append(f"| {robot} | " + " | ".join(cells)
+                     + f" | {r.total_time_s:.0f} / {r.total_distance_m:.1f} |")
+    lines += ["", "| robot | goals by outcome | time by frontier class s | time by state s |",
+              "|---|---|---|---|"]
+    for robot, r in per_robot.items():
+        goals = ", ".join(f"{k} {r.goals[k]}" for k in OUTCOMES if r.goals[k])
+        classes = ", ".join(f"{k} {v:.0f}" for k, v in sorted(r.class_time_s.items()))
+        states = ", ".join(f"{k} {v:.0f}" for k, v in sorted(r.state_time_s.items()))
+        lines.append(f"| {robot} | {goals} | {classes} | {states} |")
+    return "\n".join(lines) + "\n"
+
+
+def explain_events(events: Sequence[dict[str, Any]],
+                   tracks: Sequence[tuple[np.ndarray, np.ndarray]], end_tick: int,
+                   tick_s: float) -> dict[int, RobotExplain]:
+    """Every robot's breakdown from a run's events (each with a "robot") and true paths."""
+    return {robot: explain_robot([e for e in events if e.get("robot") == robot], stamps, xy,
+                                 end_tick, tick_s)
+            for robot, (stamps, xy) in enumerate(tracks)}

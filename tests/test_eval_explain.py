@@ -1,0 +1,80 @@
+"""Where each robot's time went (services/evaluator/explain.py) and events.jsonl's order."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from services.evaluator.explain import explain_robot, goal_spans, markdown, state_times
+from services.launcher.report import ordered_events
+
+TICK_S = 0.1
+
+
+def _goal(tick: int, goal_id: int, cls: str = "unexplored", cancel: bool = False) -> dict:
+    return {"tick": tick, "kind": "goal", "goal_id": goal_id, "frontier_class": cls,
+            "cancel": cancel}
+
+
+def _status(tick: int, goal_id: int, status: str) -> dict:
+    return {"tick": tick, "kind": "status", "goal_id": goal_id, "status": status}
+
+
+def test_each_goal_gets_one_outcome() -> None:
+    events = [
+        _goal(10, 0), _status(11, 0, "active"), _status(50, 0, "reached"),
+        _goal(60, 1), _status(61, 1, "active"),
+        _goal(80, 2, "weak"),  # 1 replaced before it ended
+        _status(85, 1, "invalid"),  # a late status of the replaced goal: ignored
+        _status(120, 2, "invalid"),
+        _goal(130, 3), _goal(130, 3),  # re-sent: one goal
+        _goal(150, 3, cancel=True),
+        _goal(170, 4), _status(200, 4, "unreachable"),
+        _goal(210, 5),
+    ]
+    spans = goal_spans(events, end_tick=300)
+    assert [(s.goal_id, s.outcome, s.start_tick, s.end_tick) for s in spans] == [
+        (0, "reached", 10, 50), (1, "replaced", 60, 80), (2, "invalid", 80, 120),
+        (3, "cancelled", 130, 150), (4, "unreachable", 170, 200), (5, "open", 210, 300)]
+
+
+def test_time_and_distance_split_by_outcome() -> None:
+    # 1 m/s along x for 30 s, sampled every tick
+    stamps = np.arange(0, 301) * TICK_S
+    xy = np.stack([stamps, np.zeros_like(stamps)], axis=1)
+    events = [_goal(0, 0), _status(100, 0, "reached"), _goal(150, 1, "weak"),
+              _status(200, 1, "invalid"),
+              {"tick": 0, "kind": "state", "state": "following"},
+              {"tick": 100, "kind": "state", "state": "idle"},
+              {"tick": 150, "kind": "state", "state": "turning"}]
+    out = explain_robot(events, stamps, xy, end_tick=300, tick_s=TICK_S)
+    assert out.goals == {"reached": 1, "invalid": 1}
+    assert out.time_s["reached"] == pytest.approx(10.0)
+    assert out.time_s["invalid"] == pytest.approx(5.0)
+    assert out.time_s["no goal"] == pytest.approx(15.0)
+    assert out.distance_m["reached"] == pytest.approx(10.0)
+    assert out.distance_m["no goal"] == pytest.approx(15.0)
+    assert out.total_distance_m == pytest.approx(30.0)
+    assert out.class_time_s == pytest.approx({"unexplored": 10.0, "weak": 5.0})
+    assert out.state_time_s == pytest.approx({"following": 10.0, "idle": 5.0, "turning": 15.0})
+    table = markdown({0: out})
+    assert "10 / 10.0" in table and "reached 1, invalid 1" in table
+
+
+def test_state_times_end_at_the_mission_end() -> None:
+    events = [{"tick": 5, "kind": "state", "state": "idle"}]
+    assert state_times(events, 25, TICK_S) == pytest.approx({"idle": 2.0})
+
+
+def test_events_are_ordered_by_tick_not_arrival() -> None:
+    """A goal's end and the next goal of the same tick: the end first, whatever arrived
+    first; events after the mission's end are left out."""
+    track = SimpleNamespace(events=[_goal(40, 2), _status(40, 1, "reached"), _goal(10, 1),
+                                    _goal(90, 3)])
+    monitor = SimpleNamespace(tracks={0: track})
+    out = ordered_events(monitor, end_tick=50)
+    assert [(e["tick"], e["kind"]) for e in out] == [(10, "goal"), (40, "status"),
+                                                     (40, "goal")]
+    assert all(e["robot"] == 0 for e in out)
