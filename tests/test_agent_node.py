@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from schemas import Keys
-from schemas.messages import Message, Odometry, Pose2D, RobotPose
+from schemas.messages import Goal, Message, Odometry, Pose2D, RobotPose
 from services.common.bus import Inbound
 from services.robot_agent.agent import AgentCore
 from services.robot_agent.config import AgentConfig
@@ -62,3 +62,23 @@ def test_messages_of_the_same_tick_wait_for_the_next_tick() -> None:
     assert 1 not in core.teammates and len(pending) == 1
     handle(bus, core, odom(6), 0.1, pending)  # type: ignore[arg-type]
     assert 1 in core.teammates and pending == []
+
+
+def test_edge_outputs_of_tick_k_apply_at_k_plus_lag_plus_one() -> None:
+    """With the edge pipelined by L ticks the sim waits for the edge's tick k only at k + L,
+    so a goal stamped k may arrive as late as just before Odometry(k + L + 1)."""
+    bus, core, pending = FakeBus(), AgentCore(AgentConfig(), 3, 0.1), []
+    goal = Goal(robot_id=3, tick=10, goal_id=7, x=1.0, y=2.0, frontier_class="unexplored",
+                revenue=1.0)
+    handle(bus, core, Inbound("spacemap/robot/3/goal", goal), 0.1, pending, 3)  # type: ignore[arg-type]
+    for tick in range(10, 14):
+        handle(bus, core, _odom(tick), 0.1, pending, 3)  # type: ignore[arg-type]
+        assert core.nav.goal is None and pending == [goal], tick
+    handle(bus, core, _odom(14), 0.1, pending, 3)  # type: ignore[arg-type]
+    assert pending == [] and core.nav.goal is not None and core.nav.goal.goal_id == 7
+
+
+def _odom(tick: int) -> Inbound:
+    return Inbound("spacemap/robot/3/odom", Odometry(
+        robot_id=3, tick=tick, stamp_ns=tick, v_mps=0.0, omega_radps=0.0,
+        pose_odom=Pose2D(x=0.0, y=0.0, yaw=0.0)))

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from schemas.messages import Clock, CmdVel, GtPose, Odometry
+from schemas.messages import Clock, CmdVel, EdgeAck, GtPose, Odometry
 from services.common.bus import Bus, BusConfig, Inbound, connect
 from services.common.router import run_router
 from services.config import SpacemapConfig
@@ -143,3 +143,39 @@ def test_lockstep_waits_for_live_agents_and_stops_waiting_for_a_dead_one() -> No
     gt0 = dict(seen.gt[0])
     turned = gt0[max(gt0)][2] - gt0[stalled_at][2]
     assert turned > 0.5 * 0.1 * 15  # robot 0 kept going (yaw stays below π: no wrap)
+
+
+def test_pipelined_lockstep_waits_for_edge_tick_k_at_tick_k_plus_lag() -> None:
+    """sim.edge_pipeline_ticks = 3: the clock runs on past edge tick k without the edge and
+    stops at k + 3 until EdgeAck(k) arrives."""
+    lag = 3
+    with sim_over_router({"robots": 1, "edge_pipeline_ticks": lag}, "pl_test") as bus:
+        subscribe_all(bus)
+        agent = bus.session.liveliness().declare_token(bus.keys.alive("agent", 0))
+        edge = bus.session.liveliness().declare_token(bus.keys.alive("edge", 0))
+        seen = Seen()
+        acking = [True]
+
+        def serve_until(done: object, limit_s: float) -> None:
+            deadline = time.monotonic() + limit_s
+            while time.monotonic() < deadline and not done():
+                msg = seen.record(bus.poll(timeout=0.05))
+                if isinstance(msg, Odometry):
+                    bus.publish(bus.keys.cmd_vel(0), CmdVel(
+                        robot_id=0, tick=msg.tick, v_mps=0.0, omega_radps=0.0))
+                # The edge answers tick k only once it saw Clock(k + lag): a clock that
+                # waited for EdgeAck(k) at tick k would never get there.
+                if isinstance(msg, Clock) and acking[0] and msg.tick >= lag \
+                        and (msg.tick - lag) % 10 == 0:
+                    bus.publish(bus.keys.edge_ack(), EdgeAck(tick=msg.tick - lag))
+
+        serve_until(lambda: seen.last_tick >= 25, 20.0)
+        assert seen.last_tick >= 25, "the clock waited for an edge answer before it was due"
+        acking[0] = False
+        serve_until(lambda: seen.last_tick >= 30 + lag, 15.0)
+        serve_until(lambda: False, 1.0)
+        assert seen.last_tick == 30 + lag, "the clock did not wait for EdgeAck(30) at tick 33"
+        edge.undeclare()  # a dead edge is not waited for
+        serve_until(lambda: seen.last_tick >= 45, 15.0)
+        assert seen.last_tick >= 45
+        agent.undeclare()

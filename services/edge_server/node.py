@@ -1,9 +1,11 @@
 """The edge server process: bus wiring around `EdgePlanner` (lockstep: ARCHITECTURE.md).
 
 On Clock(k) with k % sim.edge_every_ticks == 0 the edge plans with everything read so far and
-publishes map/grid, map/frontiers, goals and corrections, then EdgeAck(k) last. The inbox is
-handled strictly in order; wall time is only logged. The `map/cloud` queryable runs on a zenoh
-thread, so it and the main loop share one lock around the planner.
+publishes map/grid, map/frontiers, goals and corrections, then EdgeAck(k) last (the simulator
+waits for it at tick k + sim.edge_pipeline_ticks). The inbox is handled strictly in order, so a
+plan sees exactly the messages of ticks < k, however long it takes; wall time is only logged.
+The `map/cloud` queryable runs on a zenoh thread, so it and the main loop share one lock around
+the planner.
 """
 
 from __future__ import annotations

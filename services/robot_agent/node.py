@@ -44,14 +44,24 @@ def _out_key(bus: Bus, robot_id: int, topic: str) -> str:
     return by_topic[topic](robot_id)
 
 
-# Messages stamped with the tick they were made at. One made at tick k by the edge or a
-# teammate races this agent's Odometry(k), but always arrives before Odometry(k + 1) (the sim
-# waits for every answer to k first), so applying them only at a later tick is deterministic.
+# Messages stamped with the tick they were made at. One made at tick k by a teammate races
+# this agent's Odometry(k), but always arrives before Odometry(k + 1) (the sim waits for every
+# answer to k first), so applying them only at a later tick is deterministic. The edge's
+# outputs of tick k are waited for only at tick k + L (L = the edge lag, sim.edge_lag_ticks),
+# so they are applied from tick k + L + 1 on, whenever they arrive before that.
 TICKED = (Goal, Correction, OccupancyGrid, RobotPose)
+FROM_EDGE = (Goal, Correction, OccupancyGrid)
+
+
+def due_at(msg: Message, edge_lag: int) -> int:
+    """The first tick whose Odometry applies `msg`."""
+    lag = edge_lag if isinstance(msg, FROM_EDGE) else 0
+    return msg.tick + lag + 1  # type: ignore[attr-defined]
 
 
 def handle(
-    bus: Bus, core: AgentCore, item: Inbound | Presence, tick_s: float, pending: list[Message]
+    bus: Bus, core: AgentCore, item: Inbound | Presence, tick_s: float, pending: list[Message],
+    edge_lag: int = 0,
 ) -> None:
     """Feed one inbound item to the core; on Odometry(k), publish the tick's outputs."""
     if isinstance(item, Presence):
@@ -64,8 +74,8 @@ def handle(
     elif isinstance(msg, RgbdFrame):
         core.on_rgbd(msg)
     elif isinstance(msg, Odometry):
-        due = [m for m in pending if m.tick < msg.tick]  # type: ignore[attr-defined]
-        pending[:] = [m for m in pending if m.tick >= msg.tick]  # type: ignore[attr-defined]
+        due = [m for m in pending if due_at(m, edge_lag) <= msg.tick]
+        pending[:] = [m for m in pending if due_at(m, edge_lag) > msg.tick]
         for earlier in due:
             _apply(core, earlier)
         for out in core.on_odometry(msg):  # CmdVel(k) is last
@@ -111,7 +121,8 @@ def main(config: SpacemapConfig, robot_id: int) -> None:
             item = bus.poll(timeout=POLL_S)
             if item is not None:
                 with lock:
-                    handle(bus, core, item, config.sim.tick_s, pending)
+                    handle(bus, core, item, config.sim.tick_s, pending,
+                           config.sim.edge_lag_ticks)
                 if isinstance(item, Inbound) and isinstance(item.message, Odometry):
                     last_tick[0] = item.message.tick
     log.info("agent %d stopped", robot_id)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 SensorPreset = Literal["realistic", "ideal"]
 
@@ -28,6 +28,11 @@ class SimConfig(BaseModel):
     )
     camera_every_ticks: int = Field(default=2, ge=1)
     edge_every_ticks: int = Field(default=10, ge=1, description="edge planning period, ticks")
+    edge_pipeline_ticks: int = Field(
+        default=0, ge=0, description="lockstep pipelining: the edge's plan for edge tick k is "
+        "waited for at tick k + this and its outputs apply from tick k + this + 1, so the plan "
+        "runs while the fleet goes on (0 = the fleet waits at tick k); < edge_every_ticks"
+    )
     width: int = Field(default=160, ge=16, le=640)
     height: int = Field(default=120, ge=12, le=480)
     hfov_deg: float = Field(default=84.1, gt=0, lt=180)
@@ -69,3 +74,18 @@ class SimConfig(BaseModel):
     odom_noise_rad_per_sqrt_rad: float | None = Field(
         default=None, ge=0, description="random-walk rotation noise, seeded (realistic 0.01)"
     )
+
+    @model_validator(mode="after")
+    def _one_plan_in_flight(self) -> SimConfig:
+        # With L ≥ edge_every_ticks the clock would publish the next edge tick before the
+        # completion verdict of the previous one is due, so the edge could plan past the stop
+        # tick and the final map would depend on when the launcher halts the simulator.
+        if self.edge_pipeline_ticks >= self.edge_every_ticks:
+            raise ValueError("edge_pipeline_ticks must be < edge_every_ticks")
+        return self
+
+    @property
+    def edge_lag_ticks(self) -> int:
+        """Ticks the agents hold the edge's outputs: the pipeline in lockstep; none in real
+        time, where nothing waits and outputs are used as soon as they arrive."""
+        return self.edge_pipeline_ticks if self.realtime is None else 0

@@ -1,9 +1,10 @@
 """The simulator process: owns the clock and runs the lockstep protocol of ARCHITECTURE.md.
 
 Per tick k: publish Clock(k), then per robot GtPose(k) (eval key), RgbdFrame(k) on camera ticks
-and Odometry(k); wait for CmdVel(tick=k) from every live agent and, on edge ticks while an edge
-is alive, EdgeAck(k); then apply the commands and integrate one tick. Real-time mode paces the
-ticks at F × wall clock, uses the latest commands and never waits.
+and Odometry(k); wait for CmdVel(tick=k) from every live agent and for EdgeAck(k − L) when
+k − L was an edge tick with the edge alive (L = `sim.edge_pipeline_ticks`, edge_barrier.py);
+then apply the commands and integrate one tick. Real-time mode paces the ticks at F × wall
+clock, uses the latest commands and never waits.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from services.common.bus import Bus, Inbound, Presence, connect  # noqa: E402
 from services.config import SpacemapConfig  # noqa: E402
 from services.simulator.config import SimConfig  # noqa: E402
 from services.simulator.core import Simulation  # noqa: E402
+from services.simulator.edge_barrier import EdgeBarrier  # noqa: E402
 
 log = logging.getLogger(__name__)
 
@@ -56,7 +58,7 @@ class SimNode:
         self.edge_alive = False
         self.commands: dict[int, tuple[float, float]] = {}
         self.answered: set[int] = set()
-        self.edge_acked = False
+        self.barrier = EdgeBarrier(cfg.edge_every_ticks, cfg.edge_pipeline_ticks)
         self.ignored = 0
         self.timing: dict[str, float] = defaultdict(float)
         self.K = self.sim.K
@@ -77,15 +79,18 @@ class SimNode:
             msg = item.message
             if isinstance(msg, CmdVel):
                 self._cmd_vel(item.key, msg)
-            elif isinstance(msg, EdgeAck) and msg.tick == self.sim.tick:
-                self.edge_acked = True
+            elif isinstance(msg, EdgeAck):
+                self.barrier.acked(msg.tick)
             elif isinstance(msg, Frontiers) and msg.complete and self.complete_tick is None:
-                # Read before the EdgeAck of the same tick: the stop tick is deterministic.
+                # Read before the EdgeAck of the same tick, and acted on only at the tick
+                # that ack is due (barrier.stop_tick): the stop tick is deterministic.
                 self.complete_tick = msg.tick
 
     def _presence(self, p: Presence) -> None:
         if p.role == "edge":
             self.edge_alive = p.alive
+            if not p.alive:
+                self.barrier.edge_gone()
             log.info("edge %s %s", p.ident, "alive" if p.alive else "gone")
         elif p.role == "agent" and p.ident.isdigit() and int(p.ident) < self.sim.n_robots:
             i = int(p.ident)
@@ -161,24 +166,20 @@ class SimNode:
             ))
 
     def wait_for_answers(self) -> bool:
-        """Block until every live agent (and the edge on edge ticks) answered tick k."""
+        """Block until every live agent answered tick k and the edge every edge tick due."""
         k = self.sim.tick
-        edge_tick = k % self.cfg.edge_every_ticks == 0
         started = time.monotonic()
         warned = False
         while not self.stop.is_set():
-            if self.live_agents <= self.answered and (
-                not edge_tick or not self.edge_alive or self.edge_acked
-            ):
+            edge_due = self.barrier.blocking(k)
+            if self.live_agents <= self.answered and not edge_due:
                 return True
             self.handle(self.bus.poll(timeout=POLL_S))
             if not warned and time.monotonic() - started > STALL_WARN_S:
                 warned = True
                 log.warning(
-                    "tick %d: still waiting for agents %s%s", k,
-                    sorted(self.live_agents - self.answered),
-                    " and the edge" if edge_tick and self.edge_alive and not self.edge_acked
-                    else "",
+                    "tick %d: still waiting for agents %s and the edge's ticks %s", k,
+                    sorted(self.live_agents - self.answered), edge_due,
                 )
         return False
 
@@ -193,9 +194,9 @@ class SimNode:
             # Agents that appeared during the last tick are waited for from this tick on.
             self.live_agents |= self.joining
             self.answered.clear()
-            self.edge_acked = False
             if realtime is None:
                 self.commands.clear()
+                self.barrier.published(self.sim.tick, self.edge_alive)
             t0 = time.perf_counter()
             self.publish_tick()
             self.timing["publish"] += time.perf_counter() - t0
@@ -210,8 +211,11 @@ class SimNode:
                 self._pace(next_wall)
                 next_wall = self._next_deadline(next_wall, period_s)
             self.timing["wait"] += time.perf_counter() - t0
-            if self.complete_tick is not None:
-                log.info("exploration complete at tick %d: the clock stops", self.complete_tick)
+            if self.complete_tick is not None and (
+                realtime is not None or self.sim.tick >= self.barrier.stop_tick(self.complete_tick)
+            ):
+                log.info("exploration complete at tick %d: the clock stops at tick %d",
+                         self.complete_tick, self.sim.tick)
                 break
             t0 = time.perf_counter()
             self.sim.step({i: c for i, c in self.commands.items() if i in self.live_agents})
