@@ -129,6 +129,8 @@ def _record(
         cpu_s = _cpu_seconds(group)  # before the halt: a stopped sim has no /proc entry
         if completed and group is not None:
             _halt(group, "sim")
+        if not completed:
+            _await_last_plan(monitor, config.sim.edge_every_ticks)
         wall_s = time.monotonic() - wall_start
         cloud = fetch_cloud(bus)
         if cloud is None:
@@ -225,6 +227,20 @@ def _wait_for_tracks(monitor: Monitor, end_stamp_ns: int, timeout_s: float = 3.0
     the deadline: a stream that stopped earlier is then cut where every stream has data)."""
     deadline = time.monotonic() + timeout_s
     while not monitor.tracks_reach(end_stamp_ns) and time.monotonic() < deadline:
+        monitor.pump(timeout=0.05)
+
+
+def _await_last_plan(monitor: Monitor, edge_every_ticks: int, timeout_s: float = 10.0) -> None:
+    """At the sim-time cap the simulator publishes its last Clock and stops without waiting,
+    but the edge still plans that tick when it is an edge tick. Read on until that plan's
+    frontiers arrive (the plan is then over and the planner lock free), so the final map
+    query cannot race the plan: a capped run's map is the last edge tick's whatever the load
+    (measured: a 120 s house run got tick 1190's map once in three)."""
+    if monitor.clock is None:
+        return
+    last = monitor.clock.tick - monitor.clock.tick % edge_every_ticks
+    deadline = time.monotonic() + timeout_s
+    while last not in monitor.recent_frontiers and time.monotonic() < deadline:
         monitor.pump(timeout=0.05)
 
 
