@@ -28,10 +28,11 @@ class SimConfig(BaseModel):
     )
     camera_every_ticks: int = Field(default=2, ge=1)
     edge_every_ticks: int = Field(default=10, ge=1, description="edge planning period, ticks")
-    edge_pipeline_ticks: int = Field(
-        default=0, ge=0, description="lockstep pipelining: the edge's plan for edge tick k is "
-        "waited for at tick k + this and its outputs apply from tick k + this + 1, so the plan "
-        "runs while the fleet goes on (0 = the fleet waits at tick k); < edge_every_ticks"
+    edge_pipeline_ticks: int | None = Field(
+        default=None, ge=0, description="lockstep pipelining L: the edge's plan for edge tick "
+        "k is waited for at tick k + L and its outputs apply from tick k + L + 1, so the plan "
+        "runs while the fleet goes on (0 = the fleet waits at tick k); < edge_every_ticks; "
+        "None = edge_every_ticks - 1, the most overlap (fastest measured, docs/benchmarks.md)"
     )
     width: int = Field(default=160, ge=16, le=640)
     height: int = Field(default=120, ge=12, le=480)
@@ -80,12 +81,18 @@ class SimConfig(BaseModel):
         # With L ≥ edge_every_ticks the clock would publish the next edge tick before the
         # completion verdict of the previous one is due, so the edge could plan past the stop
         # tick and the final map would depend on when the launcher halts the simulator.
-        if self.edge_pipeline_ticks >= self.edge_every_ticks:
+        if self.edge_pipeline_ticks is not None and \
+                self.edge_pipeline_ticks >= self.edge_every_ticks:
             raise ValueError("edge_pipeline_ticks must be < edge_every_ticks")
         return self
 
     @property
     def edge_lag_ticks(self) -> int:
-        """Ticks the agents hold the edge's outputs: the pipeline in lockstep; none in real
-        time, where nothing waits and outputs are used as soon as they arrive."""
-        return self.edge_pipeline_ticks if self.realtime is None else 0
+        """L: ticks between an edge tick and the one its answer is due at, which the agents
+        hold the edge's outputs for; none in real time, where nothing waits and outputs are
+        used as soon as they arrive."""
+        if self.realtime is not None:
+            return 0
+        if self.edge_pipeline_ticks is None:
+            return self.edge_every_ticks - 1
+        return self.edge_pipeline_ticks

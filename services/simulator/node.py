@@ -58,7 +58,7 @@ class SimNode:
         self.edge_alive = False
         self.commands: dict[int, tuple[float, float]] = {}
         self.answered: set[int] = set()
-        self.barrier = EdgeBarrier(cfg.edge_every_ticks, cfg.edge_pipeline_ticks)
+        self.barrier = EdgeBarrier(cfg.edge_every_ticks, cfg.edge_lag_ticks)
         self.ignored = 0
         self.timing: dict[str, float] = defaultdict(float)
         self.K = self.sim.K
