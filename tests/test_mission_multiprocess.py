@@ -102,9 +102,9 @@ def test_spacemap_run_writes_a_run_folder_and_repeats_exactly(tmp_path: Path) ->
     for name in ("grid.pgm", "grid.yaml", "config.yaml", "report.md", "timeseries.csv",
                  "trajectory_0_gt.tum", "robot_1_map.ply"):
         assert (out / name).exists(), name
-    # Lockstep determinism (SPEC §8): same seed and world, identical metrics but wall time,
-    # with the edge pipelined (the edge's outputs of tick k apply at k + L + 1, L > 0).
-    assert load_config(out / "config.yaml").sim.edge_lag_ticks > 0
+    # Lockstep determinism (SPEC §8): same seed and world, identical metrics but wall time
+    # (the default protocol: the fleet waits for every plan, L = 0).
+    assert load_config(out / "config.yaml").sim.edge_lag_ticks == 0
     again = _spacemap_run(tmp_path / "again", *args)
     metrics.pop("wall_time_s"), again.pop("wall_time_s")
     assert again == metrics
@@ -117,14 +117,15 @@ def test_spacemap_run_writes_a_run_folder_and_repeats_exactly(tmp_path: Path) ->
     assert '"kind": "goal"' in events and '"kind": "state"' in events
 
 
-def test_unpipelined_edge_repeats_exactly(tmp_path: Path) -> None:
-    """sim.edge_pipeline_ticks = 0, the protocol before pipelining (the fleet waits for every
-    plan), still repeats exactly; the default, pipelined L, is the run-folder test's above."""
+def test_pipelined_edge_repeats_exactly(tmp_path: Path) -> None:
+    """sim.edge_pipeline_ticks = 9 (the edge's outputs of tick k apply at k + L + 1, the plan
+    runs while the fleet goes on) repeats exactly too; the default, L = 0, is the run-folder
+    test's above."""
     args = ("--robots", "2", "--sim-time", "12", "--seed", "2", "--sample-every", "0",
-            "--set", "sim.edge_pipeline_ticks=0")
+            "--set", "sim.edge_pipeline_ticks=9")
     first = _spacemap_run(tmp_path / "first", *args)
     assert yaml.safe_load((tmp_path / "first" / "config.yaml").read_text()
-                          )["sim"]["edge_pipeline_ticks"] == 0
+                          )["sim"]["edge_pipeline_ticks"] == 9
     assert first["total_distance_m"] > 1.0  # the robots followed the edge's goals
     again = _spacemap_run(tmp_path / "again", *args)
     first.pop("wall_time_s"), again.pop("wall_time_s")

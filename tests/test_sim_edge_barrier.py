@@ -42,7 +42,9 @@ def test_an_edge_that_was_not_alive_or_died_is_not_waited_for() -> None:
 def test_pipeline_must_leave_one_plan_in_flight() -> None:
     assert SimConfig(edge_pipeline_ticks=4).edge_lag_ticks == 4
     assert SimConfig(edge_pipeline_ticks=4, realtime=1.0).edge_lag_ticks == 0
-    assert SimConfig().edge_lag_ticks == 9  # default: the whole planning period
-    assert SimConfig(edge_every_ticks=4).edge_lag_ticks == 3
+    assert SimConfig().edge_lag_ticks == 0  # default: the fleet waits for every plan
+    none = {"edge_pipeline_ticks": None}  # None: the whole planning period
+    assert SimConfig(**none).edge_lag_ticks == 9
+    assert SimConfig(edge_every_ticks=4, **none).edge_lag_ticks == 3
     with pytest.raises(ValidationError):
         SimConfig(edge_pipeline_ticks=10)
