@@ -19,8 +19,11 @@ from schemas.arrays import ArraySpec
 SCHEMA_VERSION = 1
 
 RobotId = Annotated[int, Field(ge=0, le=255)]
-Tick = Annotated[int, Field(ge=0)]
-StampNs = Annotated[int, Field(ge=0)]
+# Bounded so an absurd value is refused at decode, not carried into id arithmetic (submap ids
+# are tick × a per-epoch stride): 2^31 ticks is 6.8 years at 0.1 s; stamps fit an int64.
+MAX_TICK = 2**31 - 1
+Tick = Annotated[int, Field(ge=0, le=MAX_TICK)]
+StampNs = Annotated[int, Field(ge=0, le=2**63 - 1)]
 
 
 class Model(BaseModel):

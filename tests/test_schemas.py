@@ -93,6 +93,16 @@ def test_unexpected_kind() -> None:
         decode(encode(m.EdgeAck(tick=1)), m.CmdVel)
 
 
+def test_absurd_tick_and_stamp_are_refused() -> None:
+    for field, value in (("tick", m.MAX_TICK + 1), ("tick", 2**64 - 1), ("stamp_ns", 2**63)):
+        obj = _raw(m.Clock(tick=3, stamp_ns=1, dt_ns=1, lockstep=True, camera_tick=False))
+        obj[field] = value
+        with pytest.raises(DecodeError):
+            decode(_pack(obj))
+    ok = _raw(m.EdgeAck(tick=m.MAX_TICK))
+    assert decode(_pack(ok)) == m.EdgeAck(tick=m.MAX_TICK)
+
+
 def test_wrong_schema_version() -> None:
     obj = _raw(m.EdgeAck(tick=1))
     obj["v"] = 2
