@@ -189,6 +189,9 @@ class Goal(Message):
     frontier_class: FrontierClass
     revenue: float
     cancel: bool = Field(default=False, description="True withdraws goal `goal_id`: stop it")
+    look_xy: tuple[float, float] | None = Field(
+        default=None, description="world (x, y), m, the robot faces on arrival before it reports "
+        "reached (the frontier region's centroid); None: report on arrival")
 
 
 GoalState = Literal["active", "reached", "invalid", "unreachable"]

@@ -171,7 +171,7 @@ def run(
     seed: Annotated[int | None, typer.Option("--seed")] = None,
     out: Annotated[Path | None, typer.Option("--out", help="run folder")] = None,
     planner: Annotated[
-        str | None, typer.Option("--planner", help="space|nearest|utility|rrt")
+        str | None, typer.Option("--planner", help="space|space-paper|nearest|utility|rrt")
     ] = None,
     no_drf: Annotated[bool, typer.Option("--no-drf", help="standalone mapping baseline")] = False,
     resolution: Annotated[str | None, typer.Option("--resolution", help="camera WxH")] = None,

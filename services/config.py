@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from services.common.bus import BusConfig
 from services.edge_server.config import EdgeConfig
@@ -32,6 +32,23 @@ class SpacemapConfig(BaseModel):
     sim: SimConfig = Field(default_factory=SimConfig)
     agent: AgentConfig = Field(default_factory=AgentConfig)
     edge: EdgeConfig = Field(default_factory=EdgeConfig)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _edge_knows_robot_speeds(cls, tree: Any) -> Any:
+        """The edge costs goals in the agents' travel time: it copies their speed limits
+        unless its section sets them."""
+        if not isinstance(tree, Mapping):
+            return tree
+        agent = tree.get("agent") or {}
+        edge = dict(tree.get("edge") or {})
+        if not isinstance(agent, Mapping) or not isinstance(tree.get("edge") or {}, Mapping):
+            return tree
+        for edge_key, agent_key in (("nav_v_mps", "max_v_mps"),
+                                    ("nav_omega_radps", "max_omega_radps")):
+            if agent_key in agent and edge_key not in edge:
+                edge[edge_key] = agent[agent_key]
+        return {**tree, "edge": edge}
 
 
 def _set_dotted(tree: dict[str, Any], dotted: str, value: Any) -> None:

@@ -70,6 +70,23 @@ def test_reaches_a_goal_behind_a_wall_through_the_door() -> None:
     assert nav.goal is None and nav.state == "idle"
 
 
+def test_on_arrival_the_robot_faces_the_look_point_before_reporting_reached() -> None:
+    grid = _wall_grid()
+    look = (-1.5, 2.5)  # behind and to the left of the arrival heading (+x)
+    goal = _goal(0.0, -1.5).model_copy(update={"look_xy": look})
+    plain = Navigator(CFG, DT)
+    plain.set_goal(_goal(0.0, -1.5), 0)
+    _, plain_events = _drive(plain, grid, (-1.5, -1.5, 0.0), 600)
+    nav = Navigator(CFG, DT)
+    nav.set_goal(goal, 0)
+    (x, y, yaw), events = _drive(nav, grid, (-1.5, -1.5, 0.0), 600)
+    assert events[-1][1].status == "reached"
+    assert events[-1][0] > plain_events[-1][0]  # the turn took ticks
+    err = math.remainder(math.atan2(look[1] - y, look[0] - x) - yaw, math.tau)
+    assert abs(err) <= CFG.look_tolerance_rad + CFG.max_omega_radps * DT
+    assert math.hypot(x, y + 1.5) <= CFG.goal_tolerance_m  # it turned in place
+
+
 def test_goal_inside_an_obstacle_snaps_to_a_free_cell() -> None:
     grid = _wall_grid()
     nav = Navigator(CFG, DT)

@@ -110,7 +110,7 @@ def open_room_planner(planner: str) -> EdgePlanner:
     return p
 
 
-@pytest.mark.parametrize("planner", ["space", "nearest", "utility", "rrt"])
+@pytest.mark.parametrize("planner", ["space", "space-paper", "nearest", "utility", "rrt"])
 def test_planners_selectable_and_never_share_a_frontier(planner: str) -> None:
     p = open_room_planner(planner)
     assert p.scorer.name == ("utility" if planner == "rrt" else planner)

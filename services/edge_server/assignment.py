@@ -3,7 +3,9 @@
 A `Scorer` turns path lengths (robots × frontiers) into scores, higher is better; a registry
 keyed by `EdgeConfig.planner` picks one: "nearest" (Yamauchi: shortest path), "utility"
 (explore_lite: gain_scale·size − potential_scale·path, greedy), "rrt" (rrt_exploration's
-frontiers, scored like "utility") and "space" (revenue U = I_t·I_g / (κ·h)).
+frontiers, scored like "utility"), "space-paper" (the paper as written: revenue
+U = I_t·I_g / (κ·h), each robot its maximum) and "space" (the same quantities coordinated and
+costed in time: coordination.py). Each scorer also names its matcher: greedy or joint.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from typing import Protocol
 import numpy as np
 
 from services.edge_server.config import EdgeConfig
+from services.edge_server.coordination import RobotStates, coordinated_revenue, joint_match
 from services.edge_server.frontiers import FrontierSet
 from services.edge_server.importance import revenue
 
@@ -24,21 +27,35 @@ log = logging.getLogger(__name__)
 class Scorer(Protocol):
     name: str
 
-    def score(self, path_m: np.ndarray, frontiers: FrontierSet) -> np.ndarray:
+    def score(self, path_m: np.ndarray, frontiers: FrontierSet, robots: RobotStates
+              ) -> np.ndarray:
         """(R, F) scores from (R, F) path lengths in metres (inf = unreachable)."""
         ...
 
+    def match(self, scores: np.ndarray) -> dict[int, int]:
+        """Row (robot) → column (frontier) pairs from the (R, F) scores."""
+        ...
 
-class NearestScorer:
+
+class _Greedy:
+    """Each robot its maximum, best first (every planner of the paper's comparison)."""
+
+    @staticmethod
+    def match(scores: np.ndarray) -> dict[int, int]:
+        return greedy_match(scores)
+
+
+class NearestScorer(_Greedy):
     """Nearest frontier by path length (Yamauchi)."""
 
     name = "nearest"
 
-    def score(self, path_m: np.ndarray, frontiers: FrontierSet) -> np.ndarray:
+    def score(self, path_m: np.ndarray, frontiers: FrontierSet, robots: RobotStates
+              ) -> np.ndarray:
         return -path_m
 
 
-class UtilityScorer:
+class UtilityScorer(_Greedy):
     """explore_lite's greedy cost, negated: gain_scale·frontier size (m) − potential·path (m)."""
 
     name = "utility"
@@ -48,31 +65,54 @@ class UtilityScorer:
         self.potential_scale = config.utility_potential_scale
         self.resolution_m = config.grid_resolution_m
 
-    def score(self, path_m: np.ndarray, frontiers: FrontierSet) -> np.ndarray:
+    def score(self, path_m: np.ndarray, frontiers: FrontierSet, robots: RobotStates
+              ) -> np.ndarray:
         size_m = frontiers.sizes * self.resolution_m
         return self.gain_scale * size_m[None, :] - self.potential_scale * path_m
 
 
-class SpaceScorer:
-    """The paper's revenue U(r_i, f′) = I_t(f)·I_g(f) / (κ·h(p_i, p_f′))."""
+class SpacePaperScorer(_Greedy):
+    """The paper's revenue U(r_i, f′) = I_t(f)·I_g(f) / (κ·h(p_i, p_f′)), as written."""
 
-    name = "space"
+    name = "space-paper"
 
     def __init__(self, config: EdgeConfig) -> None:
         self.kappa = config.revenue_kappa
         self.min_path_m = config.revenue_min_path_m
 
-    def score(self, path_m: np.ndarray, frontiers: FrontierSet) -> np.ndarray:
+    def score(self, path_m: np.ndarray, frontiers: FrontierSet, robots: RobotStates
+              ) -> np.ndarray:
         n = len(frontiers)
         gain = frontiers.gain if frontiers.gain is not None else np.ones(n)
         imp = frontiers.importance if frontiers.importance is not None else np.ones(n)
         return revenue(imp, gain, path_m, self.kappa, self.min_path_m)
 
 
+class SpaceScorer:
+    """SPACE's I_t and I_g per second of travel, teammates' views discounted, solved jointly."""
+
+    name = "space"
+
+    def __init__(self, config: EdgeConfig) -> None:
+        self.config = config
+
+    def score(self, path_m: np.ndarray, frontiers: FrontierSet, robots: RobotStates
+              ) -> np.ndarray:
+        c = self.config
+        return coordinated_revenue(
+            path_m, frontiers, robots, v_mps=c.nav_v_mps, omega_radps=c.nav_omega_radps,
+            view_radius_m=c.space_view_radius_m, teammate_discount=c.space_teammate_discount,
+            min_time_s=c.revenue_min_path_m / c.nav_v_mps)
+
+    def match(self, scores: np.ndarray) -> dict[int, int]:
+        return joint_match(scores) if self.config.space_joint else greedy_match(scores)
+
+
 SCORERS: dict[str, Callable[[EdgeConfig], Scorer]] = {
     "nearest": lambda _config: NearestScorer(),
     "utility": UtilityScorer,
     "rrt": UtilityScorer,
+    "space-paper": SpacePaperScorer,
     "space": SpaceScorer,
 }
 

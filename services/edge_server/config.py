@@ -12,7 +12,7 @@ class EdgeConfig(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
-    planner: Literal["space", "nearest", "utility", "rrt"] = "space"
+    planner: Literal["space", "space-paper", "nearest", "utility", "rrt"] = "space"
     grid_resolution_m: float = Field(default=0.05, gt=0)
     voxel_m: float = Field(default=0.05, gt=0)
     # merged grid
@@ -51,6 +51,18 @@ class EdgeConfig(BaseModel):
     importance_xi_s: float = Field(default=-400.0, description="ξ, s")
     revenue_kappa: float = Field(default=1.0, gt=0, description="κ, 1/m")
     revenue_min_path_m: float = Field(default=0.5, gt=0, description="h floor, m")
+    # coordinated space (coordination.py; evidence: docs/edge.md, "Coordinated space")
+    space_view_radius_m: float = Field(
+        default=1.5, ge=0, description="regions this close to f′ are seen from it; a teammate's "
+        "goal this close discounts them")
+    space_teammate_discount: float = Field(default=0.25, ge=0, le=1)
+    space_joint: bool = Field(default=True, description="assignment problem instead of greedy")
+    space_look_at_region: bool = Field(default=False, description="goals carry the region's "
+                                       "centroid: the robot faces it before reporting reached")
+    nav_v_mps: float = Field(default=0.5, gt=0, description="the agents' max_v_mps (the "
+                             "mission config copies it)")
+    nav_omega_radps: float = Field(default=0.7853981633974483, gt=0,
+                                   description="the agents' max_omega_radps (copied likewise)")
     # baselines
     utility_gain_scale: float = Field(default=1.0, ge=0, description="explore_lite gain_scale")
     utility_potential_scale: float = Field(default=3.0, ge=0, description="explore_lite "

@@ -22,8 +22,9 @@ from scipy import ndimage
 
 from schemas.messages import Goal, GoalStatus
 from services.common.grid import GridSpec
-from services.edge_server.assignment import Scorer, greedy_match
+from services.edge_server.assignment import Scorer
 from services.edge_server.config import EdgeConfig
+from services.edge_server.coordination import RobotStates
 from services.edge_server.frontiers import FrontierSet
 from services.edge_server.robot_fields import RobotFields
 
@@ -132,9 +133,10 @@ class GoalBook:
 
     def plan(
         self, tick: int, robots: list[int], fields: RobotFields,
-        frontiers: FrontierSet, spec: GridSpec, scorer: Scorer,
+        frontiers: FrontierSet, spec: GridSpec, scorer: Scorer, poses: np.ndarray,
     ) -> Assignment:
-        """Keep surviving goals, give every other robot its best free frontier."""
+        """Keep surviving goals, give every other robot its best free frontier.
+        `poses`: (R, 3) x, y, yaw (world) of `robots`, in that order."""
         goal_rc = frontiers.goal_rc
         usable = self.allowed(frontiers, tick) & fields.reachable[goal_rc[:, 0], goal_rc[:, 1]]
         kept = self._kept(robots, fields, frontiers, spec, usable)
@@ -145,13 +147,16 @@ class GoalBook:
                           else np.full(len(frontiers), np.inf)
                           for r in robots]).reshape(len(robots), len(frontiers))
         dropped = {r: self.active.pop(r) for r in sorted(self.active) if r not in kept}
-        scores = scorer.score(reach * spec.resolution_m, frontiers)
+        held = np.array([self.active[r].goal_xy for r in sorted(kept)]).reshape(-1, 2)
+        poses = np.asarray(poses, np.float64).reshape(len(robots), 3)
+        scores = scorer.score(reach * spec.resolution_m, frontiers,
+                              RobotStates(poses[:, :2], poses[:, 2], held))
         scores[:, ~usable] = -np.inf
         scores[:, list(kept.values())] = -np.inf
         scores[[i for i, r in enumerate(robots) if r in kept], :] = -np.inf
         new_goals = []
         assigned = dict(kept)
-        for i, f in greedy_match(scores).items():
+        for i, f in scorer.match(scores).items():
             assigned[robots[i]] = f
             new_goals.append(self._issue(robots[i], f, tick, frontiers, float(scores[i, f])))
         for robot, old in dropped.items():  # frontier gone and nothing else: withdraw the goal
@@ -170,5 +175,9 @@ class GoalBook:
         self.issued[goal_id] = (goal_xy[0], goal_xy[1], weak)
         anchor_xy = (float(frontiers.anchor_xy[f, 0]), float(frontiers.anchor_xy[f, 1]))
         self.active[robot] = ActiveGoal(goal_id, goal_xy, anchor_xy, score, weak)
+        look = None
+        if self.config.planner == "space" and self.config.space_look_at_region:
+            look = (float(frontiers.centroid_xy[f, 0]), float(frontiers.centroid_xy[f, 1]))
         return Goal(robot_id=robot, tick=tick, goal_id=goal_id, x=goal_xy[0], y=goal_xy[1],
-                    frontier_class="weak" if weak else "unexplored", revenue=score)
+                    frontier_class="weak" if weak else "unexplored", revenue=score,
+                    look_xy=look)

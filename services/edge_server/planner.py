@@ -171,7 +171,7 @@ class EdgePlanner:
     ) -> FrontierSet:
         """Frontier regions of the configured planner, with goals among `reachable` cells."""
         cfg, spec = self.config, snap.spec
-        if cfg.planner == "space":
+        if cfg.planner in ("space", "space-paper"):
             fs, _ = detect_spatial_frontiers(self.merged, snap.known, reachable, spec, cfg,
                                              self._point_frontiers(), goal_edt)
             # F_w regions already seen from close by are not worth a trip (completion.py)
@@ -213,7 +213,8 @@ class EdgePlanner:
         reachable = fields.reachable
         fs = self._frontiers(tick, snap, traversable, reachable, fields, robot_xy,
                              goal_transform(reachable))
-        result = self.book.plan(tick, robots, fields, fs, spec, self.scorer)
+        poses = np.array([[self.poses[r].x, self.poses[r].y, self.poses[r].yaw] for r in robots])
+        result = self.book.plan(tick, robots, fields, fs, spec, self.scorer, poses)
         complete = self.judge.update(tick, result.assignable, int(snap.known.sum()))
         grid_msg = OccupancyGrid(tick=tick, resolution_m=spec.resolution_m, origin_x=spec.origin_x,
                                  origin_y=spec.origin_y, cells=snap.cells)

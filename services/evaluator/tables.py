@@ -1,5 +1,6 @@
 """The paper's tables from bench records: Table I (mapping: standalone vs SPACE) and Table II
-(exploration: nearest, utility, rrt vs SPACE), mean ± std over seeds, as markdown and CSV."""
+(exploration: nearest, utility, rrt vs SPACE as written and SPACE coordinated), mean ± std
+over seeds, as markdown and CSV."""
 
 from __future__ import annotations
 
@@ -13,12 +14,13 @@ from typing import Any
 METHODS: dict[str, tuple[str, bool]] = {
     "standalone": ("space", False),
     "space": ("space", True),
+    "space-paper": ("space-paper", True),
     "nearest": ("nearest", True),
     "utility": ("utility", True),
     "rrt": ("rrt", True),
 }
 TABLE1_METHODS = ("standalone", "space")
-TABLE2_METHODS = ("nearest", "utility", "rrt", "space")
+TABLE2_METHODS = ("nearest", "utility", "rrt", "space-paper", "space")
 TABLE1_METRICS = {
     "coverage_3d_pct": "3D coverage (%)", "bounding_volume_pct": "bounding volume (%)",
     "rmse_3d_cm": "3D RMSE (cm)", "ate_rmse_cm": "ATE (cm)",

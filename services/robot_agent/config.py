@@ -131,6 +131,9 @@ class AgentConfig(BaseModel):
         default=0.7, gt=0, description="heading error above which the robot turns in place"
     )
     k_omega: float = Field(default=1.5, gt=0, description="turn-in-place gain, 1/s")
+    look_tolerance_rad: float = Field(
+        default=0.35, gt=0, description="on arrival, a goal's look point this far off the "
+        "heading counts as faced (well inside the camera's half FoV)")
     spin_omega_radps: float = Field(default=0.4, ge=0, description="rotation while idle")
     yield_dist_m: float = Field(
         default=0.7, ge=0, description="stop driving when a teammate centre is this close ahead"

@@ -152,12 +152,14 @@ class Navigator:
         self.t_e: np.ndarray = np.zeros(0)  # per segment of the current path
         self.log = PassLog(0)
         self.state = "idle"
+        self.arrived_tick: int | None = None  # at f′, turning to the goal's look point
 
     def set_goal(self, goal: Goal, tick: int) -> StatusEvent | None:
         """Adopt a goal; the same goal id again changes nothing."""
         if self.goal is not None and goal.goal_id == self.goal.goal_id:
             return None
         self.goal, self.path_xy, self.index = goal, None, 0
+        self.arrived_tick = None
         self.log = PassLog(tick)
         return StatusEvent(goal.goal_id, "active")
 
@@ -166,12 +168,14 @@ class Navigator:
         if self.goal is None or self.goal.goal_id != goal_id:
             return False
         self.goal, self.path_xy, self.state = None, None, "idle"
+        self.arrived_tick = None
         return True
 
     def _finish(self, status: GoalState, reason: str = "") -> StatusEvent:
         assert self.goal is not None
         event = StatusEvent(self.goal.goal_id, status, reason)
         self.goal, self.path_xy, self.state = None, None, "idle"
+        self.arrived_tick = None
         return event
 
     def _plan(self, grid: LocalGrid, pose: tuple[float, float, float], tick: int) -> PlanResult:
@@ -212,6 +216,8 @@ class Navigator:
         if self.goal is None:
             self.state = "idle"
             return Command(0.0, cfg.spin_omega_radps), None
+        if self.arrived_tick is not None:
+            return self._look(pose, tick)
         xy = np.array(pose[:2])
         if self._needs_plan(grid, tick):
             result = self._plan(grid, pose, tick)
@@ -222,13 +228,31 @@ class Navigator:
         self.log.passed(tick, self.t_e[self.index : index])
         self.index = index
         if np.hypot(*(self.path_xy[-1] - xy)) <= cfg.goal_tolerance_m:
-            return Command(0.0, 0.0), self._finish("reached")
+            self.arrived_tick = tick
+            return self._look(pose, tick)
         event = self._check_progress(tick)
         if event is not None:
             return Command(0.0, 0.0), event
         cmd = pure_pursuit(pose, self.path_xy, self.index, cfg)
         self.state = "turning" if cmd.v_mps == 0.0 else "following"
         return cmd, None
+
+    def _look(self, pose: tuple[float, float, float], tick: int
+              ) -> tuple[Command, StatusEvent | None]:
+        """At f′: turn in place to face the goal's look point, then report reached. A turn
+        that takes longer than a half turn at full rate (plus a second) ends anyway."""
+        assert self.goal is not None and self.arrived_tick is not None
+        cfg = self.config
+        look = self.goal.look_xy
+        if look is None:
+            return Command(0.0, 0.0), self._finish("reached")
+        err = wrap_angle(math.atan2(look[1] - pose[1], look[0] - pose[0]) - pose[2])
+        limit_ticks = (math.pi / cfg.max_omega_radps + 1.0) / self.tick_s
+        if abs(err) <= cfg.look_tolerance_rad or tick - self.arrived_tick > limit_ticks:
+            return Command(0.0, 0.0), self._finish("reached")
+        self.state = "turning"
+        omega = float(np.clip(cfg.k_omega * err, -cfg.max_omega_radps, cfg.max_omega_radps))
+        return Command(0.0, omega), None
 
     def _check_progress(self, tick: int) -> StatusEvent | None:
         """The adaptive validator: time over the last β points against their t_e."""

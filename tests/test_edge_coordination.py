@@ -1,0 +1,97 @@
+"""The coordinated `space` scorer's pieces (coordination.py), each on a case it must decide."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from services.config import SpacemapConfig
+from services.edge_server.assignment import greedy_match, make_scorer
+from services.edge_server.config import EdgeConfig
+from services.edge_server.coordination import (
+    RobotStates,
+    joint_match,
+    teammate_factor,
+    travel_time_s,
+    view_information,
+)
+from services.edge_server.frontiers import FrontierSet
+
+
+def regions(centroid_xy: list[tuple[float, float]], gain: list[float]) -> FrontierSet:
+    """Regions whose goal f′ is their centroid (labels unused by the scorers)."""
+    xy = np.array(centroid_xy, np.float64)
+    n = len(xy)
+    return FrontierSet(labels=np.zeros((1, 1), np.int32), sizes=np.full(n, 10),
+                       centroid_xy=xy, anchor_rc=np.zeros((n, 2), np.int64), anchor_xy=xy,
+                       goal_rc=np.zeros((n, 2), np.int64), goal_xy=xy,
+                       weak=np.zeros(n, bool), gain=np.array(gain, np.float64),
+                       importance=np.ones(n))
+
+
+def test_view_information_counts_every_region_a_goal_sees() -> None:
+    xy = np.array([[0.0, 0.0], [1.0, 0.0], [5.0, 0.0]])
+    view = view_information(xy, xy, np.array([1.0, 2.0, 4.0]), radius_m=1.5)
+    np.testing.assert_allclose(view, [3.0, 3.0, 4.0])
+    alone = view_information(xy, xy, np.array([1.0, 2.0, 4.0]), radius_m=0.0)
+    np.testing.assert_allclose(alone, [1.0, 2.0, 4.0])  # a goal always sees its own region
+
+
+def test_teammate_goal_discounts_what_it_will_see() -> None:
+    xy = np.array([[0.0, 0.0], [3.0, 0.0]])
+    np.testing.assert_allclose(teammate_factor(xy, np.array([[0.5, 0.0]]), 1.0, 0.25),
+                               [0.25, 1.0])
+    np.testing.assert_allclose(teammate_factor(xy, np.zeros((0, 2)), 1.0, 0.25), [1.0, 1.0])
+
+
+def test_travel_time_charges_the_turn() -> None:
+    goals = np.array([[1.0, 0.0], [-1.0, 0.0]])
+    t = travel_time_s(np.array([[1.0, 1.0]]), np.zeros((1, 2)), np.zeros(1), goals, 0.5,
+                      math.pi / 4)
+    np.testing.assert_allclose(t, [[2.0, 2.0 + 4.0]])  # 180° at π/4 rad/s
+
+
+def test_joint_match_maximises_the_total_where_greedy_does_not() -> None:
+    scores = np.array([[10.0, 9.0], [8.0, -np.inf]])
+    assert greedy_match(scores) == {0: 0}  # robot 1 left without a goal
+    assert joint_match(scores) == {0: 1, 1: 0}
+    assert joint_match(np.full((2, 3), -np.inf)) == {}
+    assert joint_match(np.array([[1.0, 2.0], [-np.inf, -np.inf]])) == {0: 1}
+    three = joint_match(np.array([[5.0, 4.0, 1.0], [4.0, 1.0, -np.inf], [2.0, -np.inf, 3.0]]))
+    assert three == {0: 1, 1: 0, 2: 2}
+
+
+def test_space_prefers_the_region_ahead_and_a_cluster_over_a_lone_region() -> None:
+    scorer = make_scorer("space", EdgeConfig(space_view_radius_m=1.0))
+    robot = RobotStates(np.zeros((1, 2)), np.zeros(1), np.zeros((0, 2)))
+    ahead_behind = regions([(2.0, 0.0), (-2.0, 0.0)], [1.0, 1.0])
+    s = scorer.score(np.array([[2.0, 2.0]]), ahead_behind, robot)
+    assert s[0, 0] > s[0, 1]
+    paper = make_scorer("space-paper", EdgeConfig())
+    p = paper.score(np.array([[2.0, 2.0]]), ahead_behind, robot)
+    assert p[0, 0] == p[0, 1]  # the paper's h counts metres only
+    lone_vs_cluster = regions([(2.0, 0.0), (2.0, 3.0), (2.5, 3.0), (2.0, 3.5)], [1.0] * 4)
+    path = np.hypot(lone_vs_cluster.goal_xy[:, 0], lone_vs_cluster.goal_xy[:, 1])[None, :]
+    s = scorer.score(path, lone_vs_cluster, robot)
+    assert int(np.argmax(s[0])) in (1, 2, 3)
+
+
+def test_space_steers_a_robot_away_from_a_teammate_goal() -> None:
+    fs = regions([(2.0, 0.0), (0.0, 2.6)], [1.0, 1.0])
+    path = np.array([[2.0, 2.6]])
+    scorer = make_scorer("space", EdgeConfig(space_view_radius_m=1.0))
+    alone = RobotStates(np.zeros((1, 2)), np.array([math.pi / 4]), np.zeros((0, 2)))
+    assert int(np.argmax(scorer.score(path, fs, alone)[0])) == 0
+    teammate = RobotStates(np.zeros((1, 2)), np.array([math.pi / 4]), np.array([[2.2, 0.0]]))
+    assert int(np.argmax(scorer.score(path, fs, teammate)[0])) == 1
+    unreachable = scorer.score(np.array([[np.inf, 1.0]]), fs, alone)
+    assert unreachable[0, 0] == -np.inf
+
+
+def test_mission_config_gives_the_edge_the_agents_speeds() -> None:
+    c = SpacemapConfig.model_validate({"agent": {"max_v_mps": 0.3, "max_omega_radps": 0.5}})
+    assert (c.edge.nav_v_mps, c.edge.nav_omega_radps) == (0.3, 0.5)
+    own = SpacemapConfig.model_validate({"agent": {"max_v_mps": 0.3}, "edge": {"nav_v_mps": 0.4}})
+    assert own.edge.nav_v_mps == 0.4
+    assert SpacemapConfig().edge.nav_v_mps == SpacemapConfig().agent.max_v_mps
