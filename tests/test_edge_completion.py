@@ -37,7 +37,7 @@ def _one_frontier_at(xy: tuple[float, float]):
 
 
 def test_third_strike_at_one_place_sets_it_aside_for_good() -> None:
-    book = GoalBook(EdgeConfig(blacklist_strikes=3, blacklist_ticks=50,
+    book = GoalBook(EdgeConfig(planner="space-paper", blacklist_strikes=3, blacklist_ticks=50,
                                reached_blacklist_ticks=50))
     fs = _one_frontier_at((1.0, 1.0))
     for goal_id, (tick, status) in enumerate([(0, "invalid"), (100, "reached")]):
@@ -49,6 +49,16 @@ def test_third_strike_at_one_place_sets_it_aside_for_good() -> None:
     book.on_status(GoalStatus(robot_id=0, tick=200, goal_id=2, status="unreachable"))
     assert not book.allowed(fs, 10**8)[0]
     assert book.allowed(_one_frontier_at((1.8, 1.8)), 300)[0]  # elsewhere unaffected
+
+
+def test_space_sets_a_reached_place_aside_for_good_the_paper_for_a_while() -> None:
+    fs = _one_frontier_at((1.0, 1.0))
+    for planner, later in (("space", False), ("space-paper", True)):
+        book = GoalBook(EdgeConfig(planner=planner, reached_blacklist_ticks=50))
+        book.issued[0] = (1.0, 1.0, False)
+        book.on_status(GoalStatus(robot_id=0, tick=0, goal_id=0, status="reached"))
+        assert not book.allowed(fs, 10)[0]
+        assert book.allowed(fs, 10**6)[0] == later, planner
 
 
 def test_cropped_robot_fields_equal_full_dijkstra() -> None:

@@ -39,7 +39,10 @@ class EdgeConfig(BaseModel):
     density_threshold: float = Field(default=27.0, gt=0, description="δ_d: F_u = ρ < δ_d")
     variance_threshold_m2: float = Field(default=0.0128, gt=0, description="δ_v: F_w = σ² > δ_v")
     frontier_link_m: float = Field(default=0.15, ge=0, description="voxels this close join")
-    unexplored_min_voxels: int = Field(default=8, ge=1)
+    unexplored_min_voxels: int = Field(
+        default=30, ge=1, description="smaller F_u regions (< 0.075 m² of 5 cm voxels) are not "
+        "worth a trip: with 8, half the goals of a house mission revisited uncleared specks "
+        "(docs/edge.md, \"Region size\")")
     weak_min_voxels: int = Field(default=25, ge=1)
     unexplored_unknown_m: float = Field(
         default=0.5, ge=0, description="an F_u region is worth visiting only this close (xy) to "
@@ -57,6 +60,10 @@ class EdgeConfig(BaseModel):
         "goal this close discounts them")
     space_teammate_discount: float = Field(default=0.25, ge=0, le=1)
     space_joint: bool = Field(default=True, description="assignment problem instead of greedy")
+    space_reached_final: bool = Field(
+        default=True, description="a reached goal's place is set aside for good (with 100 "
+        "ticks, 20-38 of 57-77 reached goals of a house mission went back to a place already "
+        "reached: docs/edge.md, \"Coordinated space\")")
     space_look_at_region: bool = Field(default=False, description="goals carry the region's "
                                        "centroid: the robot faces it before reporting reached")
     nav_v_mps: float = Field(default=0.5, gt=0, description="the agents' max_v_mps (the "

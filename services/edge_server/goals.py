@@ -69,6 +69,8 @@ class GoalBook:
         ticks = self.config.blacklist_ticks
         if status.status == "reached":
             ticks = self.config.weak_visited_ticks if weak else self.config.reached_blacklist_ticks
+            if self.config.planner == "space" and self.config.space_reached_final:
+                ticks = FOREVER_TICKS  # what a visit did not clear, another from there won't
         r2 = self.config.blacklist_radius_m**2
         n = 1 + sum((x - sx) ** 2 + (y - sy) ** 2 <= r2 for sx, sy in self.strikes)
         self.strikes.append((x, y))
