@@ -147,6 +147,15 @@ def worlds() -> None:
         typer.echo(f"{name}\t{WORLDS[name].description}")
 
 
+def _check_view(view: str) -> None:
+    from services.launcher.config import parse_view
+
+    try:
+        parse_view(view)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc)) from exc
+
+
 def _parse_spawn(text: str) -> list[list[float]]:
     poses = []
     for item in filter(None, (s.strip() for s in text.split(";"))):
@@ -223,6 +232,8 @@ def run(
         raise typer.BadParameter(
             f"--spawn gives {len(cfg.sim.spawn)} poses for {cfg.sim.robots} robots"
         )
+    if view:
+        _check_view(view_to)
     out_dir = out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     try:
         result = run_mission(cfg, out_dir, router_endpoint=connect, sample_every_s=sample_every,
@@ -379,9 +390,10 @@ def view(
     from services.launcher.view import watch_mission
 
     _setup_logging(log_level)
+    _check_view(to)
     try:
         watch_mission(service_config(config, connect, set_), to, save, sample_every)
-    except (MissionError, ValueError) as exc:
+    except MissionError as exc:
         typer.echo(f"view stopped: {exc}", err=True)
         raise typer.Exit(1) from exc
 

@@ -52,9 +52,14 @@ def test_two_robot_mission_over_the_bus(tmp_path: Path) -> None:
     write_config(config, tmp_path / "config.yaml")
     group = ProcessGroup(tmp_path / "logs")
     group.start("router", spacemap_command("router", "--listen", endpoint))
+    rrd = tmp_path / "view.rrd"
     try:
         with connect(config.bus) as bus:
             monitor = Monitor(bus, robots=2)
+            # `spacemap view` watching from its own process, as against a compose mission
+            group.start("view", spacemap_command(
+                "view", "--config", str(tmp_path / "config.yaml"), "--to",
+                f"serve:{free_tcp_port()}", "--save", str(rrd), "--sample-every", "5"))
             start_services(group, tmp_path / "config.yaml", robots=2)
             wait_for(lambda: monitor.clock is not None and monitor.grid is not None,
                      monitor, group, 120, "the first tick and merged grid")
@@ -71,9 +76,15 @@ def test_two_robot_mission_over_the_bus(tmp_path: Path) -> None:
                 assert travelled > 1.0, f"robot {robot} moved only {travelled:.2f} m"
             assert bus.dropped.total() == 0, f"monitor dropped messages: {bus.dropped}"
     finally:
-        codes = group.stop(order=["sim", "edge", "agent0", "agent1", "router"])
+        codes = group.stop(order=["view", "sim", "edge", "agent0", "agent1", "router"])
     assert all(code == 0 for name, code in codes.items()), f"unclean exits: {codes}"
     assert processes_tagged(tmp_path / "logs") == [], "processes left behind"
+    # the viewer, stopped by SIGTERM, closed its recording: poses, maps and coverage in it
+    rows, span = rrd_entities(rrd)
+    for entity in ("/world/robots/0", "/world/robots/1", "/grid/image", "/world/map/cloud",
+                   "/plots/coverage_3d_pct", "/cameras/0/rgb"):
+        assert rows.get(entity, 0) > 0, entity
+    assert span is not None and span[1] >= 25.0
 
 
 def config_sensors(run_dir: Path) -> str:

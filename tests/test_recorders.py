@@ -17,7 +17,7 @@ from rich.console import Console
 from schemas import messages as m
 from services.evaluator.plots import plot_label, world_label
 from services.launcher import ros2_defs
-from services.launcher.config import RecordConfig
+from services.launcher.config import RecordConfig, parse_view
 from services.launcher.monitor import RobotTrack
 from services.launcher.panel import current_goal, mission_panel
 from services.launcher.recorders import MCAP_NAME, RRD_NAME, Recorders, Throttle, open_recorders
@@ -216,3 +216,13 @@ def test_the_panel_shows_each_robots_state_and_goal() -> None:
                  "idle"):
         assert part in text, part
     assert "worlds/" not in text
+
+
+def test_a_live_view_target_is_checked_before_the_mission_starts() -> None:
+    assert parse_view("spawn") == ("spawn", 9876)
+    assert parse_view("serve:9000") == ("serve", 9000)
+    assert parse_view("rerun+http://10.0.0.2:9876/proxy") == ("url",
+                                                              "rerun+http://10.0.0.2:9876/proxy")
+    for bad in ("serve:port", "serve:0", "http://host:9876", "show"):
+        with pytest.raises(ValueError):
+            parse_view(bad)

@@ -26,3 +26,21 @@ class RecordConfig(BaseModel):
         default="robot", description="rerun cloud colour: first observer, height or camera")
     camera_every_s: float = Field(
         default=1.0, gt=0, description="sim s between camera images (live view only)")
+
+
+DEFAULT_VIEW_PORT = 9876
+
+
+def parse_view(view: str) -> tuple[Literal["spawn", "serve", "url"], int | str]:
+    """A live view's target: "spawn[:PORT]" (start a native viewer and stream to it),
+    "serve[:PORT]" (host a gRPC server: `rerun rerun+http://HOST:PORT/proxy` connects) or a
+    `rerun+http://…/proxy` URL of a viewer already running; ValueError otherwise."""
+    if view.startswith(("rerun://", "rerun+http://", "rerun+https://")):
+        return "url", view
+    mode, _, port_text = view.partition(":")
+    if mode in ("spawn", "serve") and (port_text == "" or port_text.isdigit()):
+        port = int(port_text) if port_text else DEFAULT_VIEW_PORT
+        if 0 < port < 65536:
+            return ("spawn" if mode == "spawn" else "serve"), port
+    raise ValueError(f"a live view is spawn[:PORT], serve[:PORT] or a rerun+http:// URL, "
+                     f"not {view!r}")

@@ -17,32 +17,25 @@ import rerun as rr
 
 from schemas import messages as m
 from services.launcher import rerun_convert as rc
-from services.launcher.config import RecordConfig
+from services.launcher.config import RecordConfig, parse_view
 from services.launcher.recorders import Throttle
 
 log = logging.getLogger(__name__)
 
-DEFAULT_VIEW_PORT = 9876
 POSE_BATCH = 10  # poses per robot sent together (1 s of sim time at the defaults)
 
 
 def view_sinks(view: str) -> list[Any]:
-    """The rerun sinks of a live view: "spawn[:PORT]" (start a native viewer and stream to
-    it), "serve[:PORT]" (host a gRPC server: `rerun rerun+http://HOST:PORT/proxy` connects)
-    or a `rerun+http://…/proxy` URL of a viewer already running."""
-    mode, _, port_text = view.partition(":")
-    if mode in ("spawn", "serve"):
-        port = int(port_text) if port_text else DEFAULT_VIEW_PORT
-        if mode == "serve":
-            sink = rr.GrpcServerSink(port=port)
-            log.info("live view served: rerun %s", sink.uri)
-            return [sink]
-        rr.spawn(port=port, connect=False)
-        return [rr.GrpcSink(f"rerun+http://127.0.0.1:{port}/proxy")]
-    if view.startswith(("rerun://", "rerun+http://", "rerun+https://")):
-        return [rr.GrpcSink(view)]
-    raise ValueError(f"--view-to wants spawn[:PORT], serve[:PORT] or a rerun+http:// URL, "
-                     f"got {view!r}")
+    """The rerun sinks of a live view (`config.parse_view`)."""
+    mode, target = parse_view(view)
+    if mode == "serve":
+        sink = rr.GrpcServerSink(port=int(target))
+        log.info("live view served: rerun %s", sink.uri)
+        return [sink]
+    if mode == "spawn":
+        rr.spawn(port=int(target), connect=False)
+        return [rr.GrpcSink(f"rerun+http://127.0.0.1:{target}/proxy")]
+    return [rr.GrpcSink(str(target))]
 
 
 class RerunRecorder:

@@ -8,6 +8,7 @@ import resource
 import shutil
 import subprocess
 import tempfile
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -186,9 +187,10 @@ def write_profile(path: Path, cpu_s: dict[str, float], wall_s: float, sim_s: flo
 def _watch(
     monitor: Monitor, sampler: CoverageSampler, group: ProcessGroup | None,
     config: SpacemapConfig, stall_timeout_s: float, console: Console | None,
+    stop: threading.Event | None = None,
 ) -> bool:
-    """Until exploration completes (True) or the sim-time cap is reached (False); a live
-    panel on a terminal, a log line every 5 s otherwise."""
+    """Until exploration completes (True) or the sim-time cap is reached or `stop` is set
+    (False); a live panel on a terminal, a log line every 5 s otherwise."""
     cap_s = config.sim.max_sim_time_s
     start = last_change = time.monotonic()
     last_tick = -1
@@ -225,7 +227,8 @@ def _watch(
                     next_log = now + 5.0
             if monitor.complete_tick is not None:
                 return True
-            if monitor.sim_time_s >= cap_s - 0.5 * config.sim.tick_s:
+            if monitor.sim_time_s >= cap_s - 0.5 * config.sim.tick_s or (
+                    stop is not None and stop.is_set()):
                 return False
 
 

@@ -15,6 +15,7 @@ from rich.console import Console
 
 from services.common.access import identity
 from services.common.bus import connect
+from services.common.signals import stop_on_signals
 from services.config import SpacemapConfig
 from services.evaluator.evaluate import probe_for
 from services.launcher.monitor import Monitor
@@ -30,7 +31,7 @@ def watch_mission(config: SpacemapConfig, view: str, save: Path | None = None,
                   sample_every_s: float = 5.0, stall_timeout_s: float = 600.0,
                   console: Console | None = None) -> bool:
     """Stream the mission on `config.bus` to the live view `view` (and `save`, an .rrd) until
-    it completes (True), reaches its sim-time cap (False) or is interrupted (False)."""
+    it completes (True), reaches its sim-time cap (False) or gets SIGINT/SIGTERM (False)."""
     probe = probe_for(config.sim)
     robots, tick_s = config.sim.robots, config.sim.tick_s
     with connect(config.bus, identity("monitor")) as bus:
@@ -42,10 +43,8 @@ def watch_mission(config: SpacemapConfig, view: str, save: Path | None = None,
         sampler.sinks.append(recorders)
         sampler.start()
         try:
-            return _watch(monitor, sampler, None, config, stall_timeout_s, console)
-        except KeyboardInterrupt:
-            log.info("view interrupted")
-            return False
+            return _watch(monitor, sampler, None, config, stall_timeout_s, console,
+                          stop_on_signals())
         finally:
             sampler.stop()
             recorders.close()
