@@ -132,12 +132,16 @@ def test_mcap_decodes_with_the_ros2_decoder_into_what_was_recorded(recorded) -> 
         assert np.abs(dyaw).max() < 1e-9
     tf = topics["/tf"][-1][1].transforms[0]
     assert tf.header.frame_id == "map" and tf.child_frame_id == "robot_1/base_link"
-    markers = topics["/frontiers"][0][1].markers
-    assert markers[0].action == 3  # DELETEALL first
-    spheres = [mk for mk in markers if mk.ns.startswith("frontiers/")]
-    assert sorted(mk.ns for mk in spheres) == ["frontiers/unexplored"] * 2 + ["frontiers/weak"] * 2
-    lines = [mk for mk in markers if mk.ns == "assignments"]
-    assert len(lines) == 1 and len(lines[0].points) == 4  # robot 0 → f1, robot 1 → f2
+    markers = {mk.ns: mk for mk in topics["/frontiers"][0][1].markers}
+    assert markers[""].action == 3  # DELETEALL first
+    fed_fr = _frontiers(0).frontiers
+    for cls in ("unexplored", "weak"):
+        got = [(p.x, p.y, p.z) for p in markers[f"frontiers/{cls}"].points]
+        assert got == [f.centroid for f in fed_fr if f.frontier_class == cls]
+    assert [(p.x, p.y) for p in markers["goals"].points] == [f.goal_xy for f in fed_fr]
+    # robot 0 → f1, robot 1 → f2, from each robot's last pose (tick 0 here)
+    line = [(p.x, p.y) for p in markers["assignments"].points]
+    assert line == [(0.0, 0.0), fed_fr[1].goal_xy, (1.0, 0.0), fed_fr[2].goal_xy]
 
 
 def test_schema_text_names_every_dependency_once() -> None:

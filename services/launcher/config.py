@@ -25,7 +25,7 @@ class RecordConfig(BaseModel):
     cloud_colors: Literal["robot", "height", "rgb"] = Field(
         default="robot", description="rerun cloud colour: first observer, height or camera")
     camera_every_s: float = Field(
-        default=1.0, gt=0, description="sim s between camera images (live view only)")
+        default=2.0, gt=0, description="sim s between camera images (live view only)")
 
 
 DEFAULT_VIEW_PORT = 9876

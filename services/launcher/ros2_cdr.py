@@ -57,7 +57,7 @@ class Cdr:
 
     def string(self, s: str) -> None:
         data = s.encode() + b"\x00"
-        self.u32(len(data))
+        self._put("I", 4, len(data))
         self.buf += data
 
     def bytes_seq(self, data: bytes) -> None:
@@ -67,8 +67,7 @@ class Cdr:
 
     # -- common structs ----------------------------------------------------------------------
     def time(self, stamp_ns: int) -> None:
-        self.i32(stamp_ns // 1_000_000_000)
-        self.u32(stamp_ns % 1_000_000_000)
+        self._put("iI", 4, stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000)
 
     def header(self, stamp_ns: int, frame_id: str) -> None:
         self.time(stamp_ns)
@@ -163,28 +162,15 @@ def tf_message(transforms: Sequence[tuple[str, m.Pose2D]], stamp_ns: int) -> byt
     return out.bytes()
 
 
-SPHERE, LINE_LIST, DELETEALL = 2, 5, 3
+SPHERE_LIST, LINE_LIST, DELETEALL = 7, 5, 3
 CLASS_RGBA = {"unexplored": (1.0, 0.55, 0.0, 0.9), "weak": (0.6, 0.2, 0.9, 0.9)}
 GOAL_RGBA = (0.1, 0.8, 0.2, 1.0)
 
 
-def _marker(out: Cdr, stamp_ns: int, ns: str, ident: int, kind: int, action: int,
-            xyz: tuple[float, float, float], scale: float, rgba: tuple[float, ...],
-            points: Sequence[tuple[float, float, float]] = ()) -> None:
-    out.header(stamp_ns, MAP_FRAME)
-    out.string(ns)
-    out.i32(ident)
-    out.i32(kind)
-    out.i32(action)
-    out.pose(*xyz, 0.0)
-    out.f64(scale, scale, scale)
-    out.f32(*rgba)
-    out.time(0)  # lifetime: forever
-    out.boolean(False)
-    out.u32(len(points))
-    for p in points:
-        out.f64(*p)
-    out.u32(0)  # colors
+def _marker_tail() -> bytes:
+    """What every marker here ends with, from `texture_resource` on (all empty): only
+    4-byte alignment inside, so the same bytes wherever a 4-aligned tail starts."""
+    out = Cdr()
     out.string("")  # texture_resource
     out.header(0, "")  # texture: CompressedImage
     out.string("")
@@ -194,27 +180,47 @@ def _marker(out: Cdr, stamp_ns: int, ns: str, ident: int, kind: int, action: int
     out.string("")  # mesh_resource
     out.string("")  # mesh_file
     out.bytes_seq(b"")
-    out.boolean(False)
+    out.boolean(False)  # mesh_use_embedded_materials
+    return out.bytes()[4:]
+
+
+_TAIL = _marker_tail()
+
+
+def _marker(out: Cdr, stamp_ns: int, ns: str, kind: int, action: int, scale: float,
+            rgba: tuple[float, ...], points: Sequence[tuple[float, float, float]] = ()) -> None:
+    out.header(stamp_ns, MAP_FRAME)
+    out.string(ns)
+    out._put("3i", 4, 0, kind, action)  # id, type, action
+    out.f64(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, scale, scale, scale)  # identity pose, scale
+    out.f32(*rgba)
+    out.time(0)  # lifetime: forever
+    out.boolean(False)  # frame_locked
+    out.u32(len(points))
+    if points:
+        out.f64(*(v for p in points for v in p))
+    out.u32(0)  # colors: one for all
+    out._align(4)
+    out.buf += _TAIL
 
 
 def frontier_markers(frontiers: m.Frontiers, robot_xy: dict[int, tuple[float, float]],
                      stamp_ns: int) -> bytes:
-    """visualization_msgs/MarkerArray: a DELETEALL, then a sphere per frontier region at its
-    centroid (orange F_u, purple F_w; size grows with the region), a green sphere per goal
-    f′ and a line from each robot to its assigned goal."""
+    """visualization_msgs/MarkerArray: a DELETEALL, then a sphere list per frontier class
+    at the regions' centroids (orange F_u, purple F_w), one of the goals f′ (green) and a
+    line list from each robot to its assigned goal."""
     by_id = {f.frontier_id: f for f in frontiers.frontiers}
-    lines = [((*robot_xy[r], 0.1), (*by_id[f].goal_xy, 0.1))
-             for r, f in sorted(frontiers.assigned.items()) if r in robot_xy and f in by_id]
+    lines = [p for r, f in sorted(frontiers.assigned.items()) if r in robot_xy and f in by_id
+             for p in ((*robot_xy[r], 0.1), (*by_id[f].goal_xy, 0.1))]
+    groups = [(f"frontiers/{cls}", SPHERE_LIST, 0.25, CLASS_RGBA[cls],
+               [f.centroid for f in frontiers.frontiers if f.frontier_class == cls])
+              for cls in ("unexplored", "weak")]
+    groups.append(("goals", SPHERE_LIST, 0.12, GOAL_RGBA,
+                   [(*f.goal_xy, 0.05) for f in frontiers.frontiers]))
+    groups.append(("assignments", LINE_LIST, 0.03, GOAL_RGBA, lines))
     out = Cdr()
-    out.u32(1 + 2 * len(frontiers.frontiers) + (1 if lines else 0))
-    _marker(out, stamp_ns, "", 0, SPHERE, DELETEALL, (0.0, 0.0, 0.0), 1.0, (0, 0, 0, 0))
-    for f in frontiers.frontiers:
-        size = 0.15 + 0.05 * math.log1p(f.size)
-        _marker(out, stamp_ns, f"frontiers/{f.frontier_class}", f.frontier_id, SPHERE, 0,
-                f.centroid, size, CLASS_RGBA[f.frontier_class])
-        _marker(out, stamp_ns, "goals", f.frontier_id, SPHERE, 0, (*f.goal_xy, 0.05), 0.12,
-                GOAL_RGBA)
-    if lines:
-        _marker(out, stamp_ns, "assignments", 0, LINE_LIST, 0, (0.0, 0.0, 0.0), 0.03,
-                GOAL_RGBA, [p for pair in lines for p in pair])
+    out.u32(1 + len(groups))
+    _marker(out, stamp_ns, "", SPHERE_LIST, DELETEALL, 1.0, (0.0, 0.0, 0.0, 0.0))
+    for ns, kind, scale, rgba, points in groups:
+        _marker(out, stamp_ns, ns, kind, 0, scale, rgba, points)
     return out.bytes()
