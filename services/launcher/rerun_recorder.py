@@ -8,6 +8,7 @@ Timelines: `sim_time` (duration, s) and `tick` (sequence). The converters are in
 from __future__ import annotations
 
 import logging
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -32,8 +33,10 @@ def view_sinks(view: str) -> list[Any]:
         sink = rr.GrpcServerSink(port=int(target))
         log.info("live view served: rerun %s", sink.uri)
         return [sink]
-    if mode == "spawn":
-        rr.spawn(port=int(target), connect=False)
+    if mode == "spawn":  # the viewer installed beside this interpreter, else PATH's
+        beside = Path(sys.executable).parent / "rerun"
+        rr.spawn(port=int(target), connect=False,
+                 executable_path=str(beside) if beside.exists() else None)
         return [rr.GrpcSink(f"rerun+http://127.0.0.1:{target}/proxy")]
     return [rr.GrpcSink(str(target))]
 
