@@ -145,11 +145,11 @@ def role_keys(keys: Keys, role: str, ident: int, robots: int) -> RoleKeys:
             serve=(keys.inventory(r),),
             token=token,
         )
-    if role == "monitor":  # the launcher's recorder and sampler, and the CLI tools
+    if role == "monitor":  # the launcher's recorder, sampler and live view; the CLI tools
         return RoleKeys(
             subscribe=(keys.clock(), keys.map_grid(), keys.map_frontiers(), keys.gt_pose("*"),
                        *(keys.any_robot(t) for t in ("pose", "goal", "goal_status", "submap",
-                                                     "cmd_vel"))),
+                                                     "cmd_vel", "rgbd"))),
             query=(keys.map_cloud(), keys.map_robot_grid(), keys.map_inventory(),
                    keys.inventory("*")),
             token=token,

@@ -22,6 +22,8 @@ SetOpt = Annotated[
     list[str] | None, typer.Option("--set", help="override a config field: section.field=value")
 ]
 LogOpt = Annotated[str, typer.Option("--log-level", help="DEBUG, INFO, WARNING")]
+VIEW_TO_HELP = ("spawn[:PORT] (start a rerun viewer), serve[:PORT] (host a gRPC server that "
+                "`rerun rerun+http://HOST:PORT/proxy` opens) or a viewer's rerun+http:// URL")
 
 
 def _setup_logging(level: str) -> None:
@@ -145,6 +147,15 @@ def worlds() -> None:
         typer.echo(f"{name}\t{WORLDS[name].description}")
 
 
+def _check_view(view: str) -> None:
+    from services.launcher.config import parse_view
+
+    try:
+        parse_view(view)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc)) from exc
+
+
 def _parse_spawn(text: str) -> list[list[float]]:
     poses = []
     for item in filter(None, (s.strip() for s in text.split(";"))):
@@ -183,6 +194,10 @@ def run(
     spawn: Annotated[str | None, typer.Option("--spawn", help='"X,Y,YAW;X,Y,YAW;..."')] = None,
     sample_every: Annotated[float, typer.Option(
         "--sample-every", help="coverage time-series period, sim s (0: final map only)")] = 5.0,
+    view: Annotated[bool, typer.Option(
+        "--view", help="watch live in rerun (see --view-to); the run folder's mission.rrd "
+        "is written either way")] = False,
+    view_to: Annotated[str, typer.Option("--view-to", help=VIEW_TO_HELP)] = "spawn",
     config: ConfigOpt = None,
     set_: SetOpt = None,
     log_level: LogOpt = "INFO",
@@ -217,10 +232,12 @@ def run(
         raise typer.BadParameter(
             f"--spawn gives {len(cfg.sim.spawn)} poses for {cfg.sim.robots} robots"
         )
+    if view:
+        _check_view(view_to)
     out_dir = out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     try:
         result = run_mission(cfg, out_dir, router_endpoint=connect, sample_every_s=sample_every,
-                             log_level=log_level)
+                             log_level=log_level, view=view_to if view else None)
     except MissionError as exc:
         typer.echo(f"mission failed: {exc}", err=True)
         raise typer.Exit(1) from exc
@@ -355,6 +372,30 @@ def record(
         typer.echo(f"recording failed: {exc}", err=True)
         raise typer.Exit(1) from exc
     typer.echo(f"run folder: {result.out_dir}")
+
+
+@app.command()
+def view(
+    to: Annotated[str, typer.Option("--to", help=VIEW_TO_HELP)] = "spawn",
+    save: Annotated[Path | None, typer.Option("--save", help="also write this .rrd")] = None,
+    sample_every: Annotated[float, typer.Option(
+        "--sample-every", help="merged cloud and coverage period, sim s")] = 5.0,
+    config: ConfigOpt = None,
+    connect: ConnectOpt = None,
+    set_: SetOpt = None,
+    log_level: LogOpt = "INFO",
+) -> None:
+    """Watch a mission started elsewhere (other hosts, docker compose) live in rerun."""
+    from services.launcher.run import MissionError
+    from services.launcher.view import watch_mission
+
+    _setup_logging(log_level)
+    _check_view(to)
+    try:
+        watch_mission(service_config(config, connect, set_), to, save, sample_every)
+    except MissionError as exc:
+        typer.echo(f"view stopped: {exc}", err=True)
+        raise typer.Exit(1) from exc
 
 
 @app.command()

@@ -17,6 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from services.common.bus import BusConfig
 from services.edge_server.config import EdgeConfig
+from services.launcher.config import RecordConfig
 from services.robot_agent.config import AgentConfig
 from services.simulator.config import SimConfig
 
@@ -32,6 +33,7 @@ class SpacemapConfig(BaseModel):
     sim: SimConfig = Field(default_factory=SimConfig)
     agent: AgentConfig = Field(default_factory=AgentConfig)
     edge: EdgeConfig = Field(default_factory=EdgeConfig)
+    record: RecordConfig = Field(default_factory=RecordConfig)
 
     @model_validator(mode="before")
     @classmethod

@@ -16,10 +16,18 @@ import yaml
 
 from services.common.bus import connect
 from services.config import load_config, write_config
+from services.evaluator import run_files as rf
 from services.launcher.monitor import Monitor
 from services.launcher.run import start_services
 from services.processes import ProcessGroup, free_tcp_port, spacemap_command
 from tests.conftest import REPO, processes_tagged
+from tests.recording_checks import (
+    cloud_points,
+    grid_cells,
+    mcap_messages,
+    pose_xyyaw,
+    rrd_entities,
+)
 
 pytestmark = pytest.mark.multiprocess
 
@@ -44,9 +52,14 @@ def test_two_robot_mission_over_the_bus(tmp_path: Path) -> None:
     write_config(config, tmp_path / "config.yaml")
     group = ProcessGroup(tmp_path / "logs")
     group.start("router", spacemap_command("router", "--listen", endpoint))
+    rrd = tmp_path / "view.rrd"
     try:
         with connect(config.bus) as bus:
             monitor = Monitor(bus, robots=2)
+            # `spacemap view` watching from its own process, as against a compose mission
+            group.start("view", spacemap_command(
+                "view", "--config", str(tmp_path / "config.yaml"), "--to",
+                f"serve:{free_tcp_port()}", "--save", str(rrd), "--sample-every", "5"))
             start_services(group, tmp_path / "config.yaml", robots=2)
             wait_for(lambda: monitor.clock is not None and monitor.grid is not None,
                      monitor, group, 120, "the first tick and merged grid")
@@ -63,9 +76,15 @@ def test_two_robot_mission_over_the_bus(tmp_path: Path) -> None:
                 assert travelled > 1.0, f"robot {robot} moved only {travelled:.2f} m"
             assert bus.dropped.total() == 0, f"monitor dropped messages: {bus.dropped}"
     finally:
-        codes = group.stop(order=["sim", "edge", "agent0", "agent1", "router"])
+        codes = group.stop(order=["view", "sim", "edge", "agent0", "agent1", "router"])
     assert all(code == 0 for name, code in codes.items()), f"unclean exits: {codes}"
     assert processes_tagged(tmp_path / "logs") == [], "processes left behind"
+    # the viewer, stopped by SIGTERM, closed its recording: poses, maps and coverage in it
+    rows, span = rrd_entities(rrd)
+    for entity in ("/world/robots/0", "/world/robots/1", "/grid/image", "/world/map/cloud",
+                   "/plots/coverage_3d_pct", "/cameras/0/rgb"):
+        assert rows.get(entity, 0) > 0, entity
+    assert span is not None and span[1] >= 25.0
 
 
 def config_sensors(run_dir: Path) -> str:
@@ -82,10 +101,23 @@ def _spacemap_run(out: Path, *args: str) -> dict:
     return json.loads((out / "metrics.json").read_text())
 
 
-def test_spacemap_run_writes_a_run_folder_and_repeats_exactly(tmp_path: Path) -> None:
-    args = ("--robots", "2", "--sim-time", "20", "--seed", "1")
-    out = tmp_path / "run"
-    metrics = _spacemap_run(out, *args)
+RUN_ARGS = ("--robots", "2", "--sim-time", "20", "--seed", "1")
+
+
+@pytest.fixture(scope="module")
+def recorded_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
+    """One short mission with everything that reads the bus on: the recordings (on by
+    default) and the live view (a rerun gRPC server: no display here)."""
+    out = tmp_path_factory.mktemp("recorded") / "run"
+    port = free_tcp_port()
+    return out, _spacemap_run(out, *RUN_ARGS, "--view", "--view-to", f"serve:{port}")
+
+
+def test_spacemap_run_writes_a_run_folder_and_repeats_exactly(
+    tmp_path: Path, recorded_run: tuple[Path, dict]
+) -> None:
+    args = RUN_ARGS
+    out, metrics = recorded_run[0], dict(recorded_run[1])
     for key in ("coverage_3d_pct", "coverage_2d_pct", "total_distance_m", "robots", "world",
                 "seed", "completed", "sim_time_s", "wall_time_s", "bytes_per_robot"):
         assert key in metrics
@@ -100,12 +132,15 @@ def test_spacemap_run_writes_a_run_folder_and_repeats_exactly(tmp_path: Path) ->
     cloud = o3d.io.read_point_cloud(str(out / "merged_map.ply"))
     assert len(cloud.points) > 1000
     for name in ("grid.pgm", "grid.yaml", "config.yaml", "report.md", "timeseries.csv",
-                 "trajectory_0_gt.tum", "robot_1_map.ply"):
+                 "trajectory_0_gt.tum", "robot_1_map.ply", "mission.mcap", "mission.rrd"):
         assert (out / name).exists(), name
     # Lockstep determinism (SPEC §8): same seed and world, identical metrics but wall time
-    # (the default protocol: the fleet waits for every plan, L = 0).
+    # (the default protocol: the fleet waits for every plan, L = 0); and the readers on the
+    # bus change nothing: the first run had the recordings and the live view, this one none.
     assert load_config(out / "config.yaml").sim.edge_lag_ticks == 0
-    again = _spacemap_run(tmp_path / "again", *args)
+    again = _spacemap_run(tmp_path / "again", *args, "--set", "record.rrd=false",
+                          "--set", "record.mcap=false")
+    assert not list((tmp_path / "again").glob("mission.*"))
     metrics.pop("wall_time_s"), again.pop("wall_time_s")
     assert again == metrics
     for robot in range(2):
@@ -133,3 +168,51 @@ def test_pipelined_edge_repeats_exactly(tmp_path: Path) -> None:
     for robot in range(2):
         name = f"trajectory_{robot}_gt.tum"
         assert (tmp_path / "first" / name).read_text() == (tmp_path / "again" / name).read_text()
+
+
+def test_mission_mcap_holds_the_run_folders_points_grid_and_poses(
+    recorded_run: tuple[Path, dict]
+) -> None:
+    """mission.mcap, decoded by mcap-ros2-support's ROS 2 decoder, holds the very points,
+    grid and poses of the run folder's PLY, PGM and TUM files."""
+    out, _ = recorded_run
+    topics = mcap_messages(out / "mission.mcap")
+    np.testing.assert_array_equal(cloud_points(topics["/map_cloud"][-1][1]),
+                                  rf.read_ply(out / rf.MERGED_MAP))
+    for robot in range(2):
+        np.testing.assert_array_equal(cloud_points(topics[f"/robot_{robot}/map_cloud"][-1][1]),
+                                      rf.read_ply(rf.robot_map_path(out, robot)))
+    grid_msg = topics["/map"][-1][1]
+    pgm = rf.read_grid(out / rf.MERGED_GRID)
+    cells = grid_cells(grid_msg)
+    as_pgm = np.where(cells >= 50, 100, np.where(cells == 0, 0, -1))  # map_server's 3 levels
+    np.testing.assert_array_equal(as_pgm, pgm.cells)
+    assert (grid_msg.info.origin.position.x, grid_msg.info.origin.position.y) == pytest.approx(
+        (pgm.origin_x, pgm.origin_y))
+    for robot in range(2):
+        for topic, tum in ((f"/robot_{robot}/odom", rf.est_trajectory_path(out, robot)),
+                           (f"/robot_{robot}/ground_truth", rf.gt_trajectory_path(out, robot))):
+            poses = {round(s): (x, y, yaw) for s, x, y, yaw in
+                     (pose_xyyaw(msg) for _, msg in topics[topic])}
+            stamps, xyyaw = rf.read_tum(tum)
+            assert len(stamps) > 100
+            got = np.array([poses[round(t * 1e9)] for t in stamps])
+            np.testing.assert_allclose(got[:, :2], xyyaw[:, :2], atol=2e-6)  # TUM: 6 decimals
+            assert np.abs(np.angle(np.exp(1j * (got[:, 2] - xyyaw[:, 2])))).max() < 1e-6
+    assert topics["/frontiers"] and topics["/tf"]
+
+
+def test_mission_rrd_loads_back_with_the_missions_entities_and_time_range(
+    recorded_run: tuple[Path, dict]
+) -> None:
+    out, metrics = recorded_run
+    rows, span = rrd_entities(out / "mission.rrd")
+    for entity in ("/world/map/cloud", "/world/robots/0", "/world/robots/1",
+                   "/world/trajectories/0/estimate", "/world/trajectories/0/ground_truth",
+                   "/world/frontiers/unexplored", "/world/goals", "/grid/image",
+                   "/plots/coverage_3d_pct", "/plots/bounding_volume_pct", "/events",
+                   "/cameras/0/rgb", "/cameras/1/depth"):  # cameras: with the live view on
+        assert rows.get(entity, 0) > 0, entity
+    assert rows["/world/robots/0"] >= 10 * metrics["sim_time_s"]  # every pose, 10 Hz
+    assert span is not None and span[0] <= 1.0
+    assert span[1] >= metrics["sim_time_s"] - 0.1

@@ -156,9 +156,16 @@ class Bus:
         self._lock = threading.Lock()
 
     # -- inbound ---------------------------------------------------------------------------
-    def subscribe(self, key_expr: str, model: type[Message]) -> None:
+    def subscribe(self, key_expr: str, model: type[Message],
+                  keep: Callable[[bytes], bool] | None = None) -> None:
+        """Queue every message on `key_expr` for `poll` (decoded and validated there);
+        `keep`, when given, sees each raw payload on the receive thread first and drops
+        those it returns False for (a cheap sampler of heavy traffic, e.g. cameras)."""
+
         def on_sample(sample: zenoh.Sample) -> None:
-            self.inbox.put(("msg", str(sample.key_expr), sample.payload.to_bytes(), model))
+            payload = sample.payload.to_bytes()
+            if keep is None or keep(payload):
+                self.inbox.put(("msg", str(sample.key_expr), payload, model))
 
         self._handles.append(self.session.declare_subscriber(key_expr, _direct(on_sample)))
 

@@ -101,13 +101,13 @@ def evaluate_run_folder(run_dir: Path, probe: Probe | None = None) -> dict[str, 
 
 def redraw_plots(run_dir: Path, metrics: dict[str, Any]) -> None:
     """coverage.png and map_top.png from the run folder's files."""
-    from services.evaluator.plots import plot_coverage, plot_map_top
+    from services.evaluator.plots import plot_coverage, plot_label, plot_map_top
 
     config = RunConfig.read(run_dir / "config.yaml")
     tracks = load_tracks(run_dir, config.sim.robots)
     frontiers = rf.read_json(run_dir / rf.FRONTIERS)["xy"] if (run_dir / rf.FRONTIERS).exists() \
         else []
-    label = f"{metrics['world']}, {metrics['robots']} robots, {metrics['planner']}"
+    label = plot_label(metrics)
     plot_coverage(rf.read_csv(run_dir / rf.TIMESERIES), run_dir / "coverage.png", label)
     plot_map_top(rf.read_ply(run_dir / rf.MERGED_MAP), [xy for _, xy in tracks],
                  np.asarray(frontiers, dtype=np.float64), run_dir / "map_top.png", label)

@@ -16,6 +16,18 @@ import numpy as np  # noqa: E402
 MAX_MAP_POINTS = 60_000  # subsample for a readable, fast scatter
 
 
+def world_label(world: str) -> str:
+    """A short name for a world given by name or MJCF path ("../worlds/small_house.xml" →
+    "small_house"), for titles, tables and the terminal panel."""
+    return Path(world).stem if world.endswith(".xml") or "/" in world else world
+
+
+def plot_label(metrics: Mapping[str, Any]) -> str:
+    """"world, N robots, planner[, no DRF]" of a run's metrics, for figure titles."""
+    return (f"{world_label(str(metrics['world']))}, {metrics['robots']} robots, "
+            f"{metrics['planner']}" + ("" if metrics.get("drf", True) else ", no DRF"))
+
+
 def _column(rows: Sequence[Mapping[str, Any]], key: str) -> np.ndarray:
     return np.array([np.nan if r.get(key) is None else r[key] for r in rows], dtype=float)
 

@@ -16,7 +16,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from services.config import SpacemapConfig
 from services.evaluator import run_files as rf
 from services.evaluator import tables as tb
-from services.evaluator.plots import plot_methods_coverage
+from services.evaluator.plots import plot_methods_coverage, world_label
 from services.launcher.run import MissionError, run_mission
 
 log = logging.getLogger(__name__)
@@ -42,11 +42,6 @@ def full_spec() -> BenchSpec:
     it) with 3 and 6 robots, every method, 3 seeds, 600 s cap."""
     worlds = ("house", "bookstore") + ((str(AWS_HOUSE),) if AWS_HOUSE.exists() else ())
     return BenchSpec(worlds=worlds, robots=(3, 6), seeds=(0, 1, 2), sim_time_s=600.0)
-
-
-def world_label(world: str) -> str:
-    """A short name for a world given by name or MJCF path."""
-    return Path(world).stem if world.endswith(".xml") else world
 
 
 def mission_config(base: SpacemapConfig, world: str, robots: int, method: str, seed: int,

@@ -10,6 +10,7 @@ import logging
 import threading
 from collections import Counter, OrderedDict
 from dataclasses import dataclass, field
+from typing import Protocol
 
 from schemas import messages as m
 from schemas.codec import peek_tick
@@ -43,6 +44,12 @@ class Snapshot:
     frontiers: int
 
 
+class MessageSink(Protocol):
+    """A reader of every message the monitor handles (the recorders, the live view)."""
+
+    def on_message(self, msg: m.Message) -> None: ...
+
+
 RECENT = 64  # edge ticks kept (6.4 s of sim time at the defaults)
 
 
@@ -55,7 +62,12 @@ def _remember(store: OrderedDict, tick: int, value: object) -> None:
 class Monitor:
     """Subscribes to everything a run report needs; call `pump()` from the main loop."""
 
-    def __init__(self, bus: Bus, robots: int) -> None:
+    def __init__(self, bus: Bus, robots: int, camera_every_ticks: int = 0,
+                 declare: bool = True) -> None:
+        """`camera_every_ticks` > 0: also read the robots' RGB-D frames of every such tick
+        (for the live view only: they are the bus's heaviest traffic, so the others are
+        dropped before decoding); `declare`: hold the `alive/monitor/0` token (the recorder
+        does; a second watcher such as `spacemap view` does not)."""
         self.bus = bus
         self.robots = robots
         self.tracks = {i: RobotTrack() for i in range(robots)}
@@ -72,6 +84,7 @@ class Monitor:
         self.series: list[Snapshot] = []
         self._bytes: Counter[tuple[int, int]] = Counter()  # (robot, tick) → payload bytes
         self.bad_taps: Counter[str] = Counter()
+        self.sinks: list[MessageSink] = []
         self._bytes_lock = threading.Lock()
         keys = bus.keys
         bus.subscribe(keys.clock(), m.Clock)
@@ -81,10 +94,17 @@ class Monitor:
         bus.subscribe(keys.any_robot("goal"), m.Goal)
         bus.subscribe(keys.any_robot("goal_status"), m.GoalStatus)
         bus.subscribe(keys.gt_pose("*"), m.GtPose)
+        if camera_every_ticks > 0:
+            def keep(payload: bytes) -> bool:  # an undecodable tick goes on, to be refused
+                tick = peek_tick(payload)
+                return tick is None or tick % camera_every_ticks == 0
+
+            bus.subscribe(keys.any_robot("rgbd"), m.RgbdFrame, keep)
         for topic in ("pose", "submap", "cmd_vel", "goal_status"):
             bus.tap(keys.any_robot(topic), self._count)
         bus.watch_liveliness()
-        bus.declare_alive("monitor", 0)
+        if declare:
+            bus.declare_alive("monitor", 0)
 
     def _count(self, key: str, payload: bytes) -> None:
         """Bytes per (robot, tick): the tick, not the arrival time, decides what counts, so a
@@ -161,7 +181,11 @@ class Monitor:
             else:
                 self.alive.discard(member)
             return
-        msg = item.message
+        self._update(item.message)
+        for sink in self.sinks:
+            sink.on_message(item.message)
+
+    def _update(self, msg: m.Message) -> None:
         if isinstance(msg, m.Clock):
             self.clock = msg
         elif isinstance(msg, m.OccupancyGrid):

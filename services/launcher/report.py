@@ -16,9 +16,10 @@ from schemas import messages as m
 from services.config import SpacemapConfig
 from services.evaluator import run_files as rf
 from services.evaluator.evaluate import evaluate_run_folder, explain_run_folder, load_tracks
-from services.evaluator.plots import plot_coverage, plot_map_top
+from services.evaluator.plots import plot_coverage, plot_label, plot_map_top
 from services.evaluator.scoring import Probe, distance_at
 from services.launcher.monitor import Monitor
+from services.launcher.recorders import Recorders
 from services.launcher.sampler import SPLIT_MAPS, CoverageSampler, fetch_robot_grid, robot_clouds
 
 log = logging.getLogger(__name__)
@@ -39,9 +40,10 @@ def mission_end_stamp_ns(config: SpacemapConfig, live: dict[str, Any]) -> int:
 
 def write_run_folder(
     out_dir: Path, config: SpacemapConfig, monitor: Monitor, sampler: CoverageSampler,
-    final_cloud: m.Cloud, live: dict[str, Any], probe: Probe,
+    final_cloud: m.Cloud, live: dict[str, Any], probe: Probe, recorders: Recorders | None = None,
 ) -> dict[str, Any]:
-    """Write every artefact of a run and return metrics.json's content."""
+    """Write every artefact of a run and return metrics.json's content; `recorders` get the
+    final maps and trimmed tracks, the same the PLY/PGM/TUM files hold."""
     robots = config.sim.robots
     per_robot, live["robot_maps_source"] = robot_clouds(monitor.bus, final_cloud, robots)
     if SPLIT_MAPS in live["robot_maps_source"]:
@@ -49,6 +51,8 @@ def write_run_folder(
     # the series ends at the final map, scored on the very robot maps metrics.json reads
     sampler.add(final_cloud, per_robot)
     monitor.trim_to_common_tick(mission_end_stamp_ns(config, live))
+    if recorders is not None:
+        recorders.finish(final_cloud, per_robot, monitor.grid, monitor.tracks)
     _write_maps(out_dir, monitor, final_cloud, per_robot, robots, live)
     for robot, track in monitor.tracks.items():
         rf.write_tum(rf.gt_trajectory_path(out_dir, robot), track.gt_stamps_ns, track.gt_xyyaw)
@@ -118,8 +122,7 @@ def write_plots(
     frontiers_xy: np.ndarray, rows: list[dict[str, Any]], metrics: dict[str, Any],
 ) -> None:
     """coverage.png and map_top.png (also rebuilt by `spacemap eval --plots`)."""
-    label = f"{metrics['world']}, {metrics['robots']} robots, {metrics['planner']}" + (
-        "" if metrics["drf"] else ", no DRF")
+    label = plot_label(metrics)
     plot_coverage(rows, out_dir / "coverage.png", f"coverage over time ({label})")
     plot_map_top(points_world, [xy for _, xy in tracks], frontiers_xy, out_dir / "map_top.png",
                  f"merged map from above ({label})")

@@ -8,18 +8,21 @@ import resource
 import shutil
 import subprocess
 import tempfile
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.live import Live
 
 from services.common.access import identity, make_credentials
 from services.common.bus import connect
 from services.config import SpacemapConfig, write_config
 from services.evaluator.evaluate import probe_for
 from services.launcher.monitor import Monitor
+from services.launcher.panel import mission_panel, status_line
+from services.launcher.recorders import camera_ticks, open_recorders
 from services.launcher.report import mission_end_stamp_ns, write_run_folder
 from services.launcher.sampler import CoverageSampler, fetch_cloud
 from services.processes import ProcessGroup, free_tcp_port, spacemap_command
@@ -62,11 +65,13 @@ def run_mission(
     console: Console | None = None,
     sample_every_s: float = 5.0,
     log_level: str = "INFO",
+    view: str | None = None,
 ) -> RunResult:
     """Start router (unless given), edge, agents and simulator; run; write the run folder.
 
     `sample_every_s`: sim-time period of the live coverage samples (0 = final map only);
-    `log_level`: the services' too (DEBUG gives each agent's per-frame registration trace)."""
+    `log_level`: the services' too (DEBUG gives each agent's per-frame registration trace);
+    `view`: a live rerun view (`rerun_recorder.view_sinks`), None for none."""
     out_dir.mkdir(parents=True, exist_ok=True)
     group = ProcessGroup(out_dir / "logs")
     secrets_dir: str | None = None
@@ -82,7 +87,7 @@ def run_mission(
                 "--set", f"bus.prefix={config.bus.prefix}"))
         config = _with_bus(config, connect=router_endpoint)
         metrics = _record(config, out_dir, group, stall_timeout_s, console, sample_every_s,
-                          log_level)
+                          log_level, view)
     finally:
         codes = group.stop(order=["sim", "edge"])
         if secrets_dir is not None:
@@ -96,11 +101,13 @@ def record_mission(
     stall_timeout_s: float = 600.0,
     console: Console | None = None,
     sample_every_s: float = 5.0,
+    view: str | None = None,
 ) -> RunResult:
     """Watch a mission whose services run elsewhere (other hosts, docker compose) and write
     its run folder when it completes or reaches the sim-time cap; starts nothing."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    metrics = _record(config, out_dir, None, stall_timeout_s, console, sample_every_s)
+    metrics = _record(config, out_dir, None, stall_timeout_s, console, sample_every_s,
+                      view=view)
     return RunResult(out_dir, metrics, {})
 
 
@@ -112,33 +119,43 @@ def _record(
     console: Console | None,
     sample_every_s: float,
     log_level: str = "INFO",
+    view: str | None = None,
 ) -> dict[str, object]:
     wall_start = time.monotonic()
     probe = probe_for(config.sim)  # before the services start: a cold ground truth takes seconds
     write_config(config, out_dir / "config.yaml")
     with connect(config.bus, identity("monitor")) as bus:
-        monitor = Monitor(bus, config.sim.robots)
+        monitor = Monitor(bus, config.sim.robots, declare=True,
+                          camera_every_ticks=camera_ticks(config) if view else 0)
         sampler = CoverageSampler(monitor, probe, sample_every_s, config.sim.tick_s)
-        if group is not None:
-            start_services(group, out_dir / "config.yaml", config.sim.robots, log_level)
-        sampler.start()
+        recorders = open_recorders(out_dir, config.sim.robots, config.record, config.sim.tick_s,
+                                   monitor.tracks, view)
+        monitor.sinks.append(recorders)
+        sampler.sinks.append(recorders)
         try:
-            completed = _watch(monitor, group, config, stall_timeout_s, console)
+            if group is not None:
+                start_services(group, out_dir / "config.yaml", config.sim.robots, log_level)
+            sampler.start()
+            try:
+                completed = _watch(monitor, sampler, group, config, stall_timeout_s, console)
+            finally:
+                sampler.stop()
+            cpu_s = _cpu_seconds(group)  # before the halt: a stopped sim has no /proc entry
+            if completed and group is not None:
+                _halt(group, "sim")
+            if not completed:
+                _await_last_plan(monitor, config.sim.edge_every_ticks)
+            wall_s = time.monotonic() - wall_start
+            cloud = fetch_cloud(bus)
+            if cloud is None:
+                raise MissionError("the edge did not answer the final map/cloud query")
+            _catch_up(monitor, cloud.tick)
+            live = _live_fields(config, monitor, completed, wall_s, sample_every_s)
+            _wait_for_tracks(monitor, mission_end_stamp_ns(config, live))
+            metrics = write_run_folder(out_dir, config, monitor, sampler, cloud, live, probe,
+                                       recorders)
         finally:
-            sampler.stop()
-        cpu_s = _cpu_seconds(group)  # before the halt: a stopped sim has no /proc entry
-        if completed and group is not None:
-            _halt(group, "sim")
-        if not completed:
-            _await_last_plan(monitor, config.sim.edge_every_ticks)
-        wall_s = time.monotonic() - wall_start
-        cloud = fetch_cloud(bus)
-        if cloud is None:
-            raise MissionError("the edge did not answer the final map/cloud query")
-        _catch_up(monitor, cloud.tick)
-        live = _live_fields(config, monitor, completed, wall_s, sample_every_s)
-        _wait_for_tracks(monitor, mission_end_stamp_ns(config, live))
-        metrics = write_run_folder(out_dir, config, monitor, sampler, cloud, live, probe)
+            recorders.close()
     write_profile(out_dir / PROFILE, cpu_s, wall_s, float(metrics["sim_time_s"]))
     return metrics
 
@@ -168,22 +185,24 @@ def write_profile(path: Path, cpu_s: dict[str, float], wall_s: float, sim_s: flo
 
 
 def _watch(
-    monitor: Monitor, group: ProcessGroup | None, config: SpacemapConfig, stall_timeout_s: float,
-    console: Console | None,
+    monitor: Monitor, sampler: CoverageSampler, group: ProcessGroup | None,
+    config: SpacemapConfig, stall_timeout_s: float, console: Console | None,
+    stop: threading.Event | None = None,
 ) -> bool:
-    """Until exploration completes (True) or the sim-time cap is reached (False)."""
+    """Until exploration completes (True) or the sim-time cap is reached or `stop` is set
+    (False); a live panel on a terminal, a log line every 5 s otherwise."""
     cap_s = config.sim.max_sim_time_s
-    last_tick, last_change = -1, time.monotonic()
+    start = last_change = time.monotonic()
+    last_tick = -1
     console = console or Console(stderr=True)
-    columns = (
-        TextColumn("[bold]sim {task.completed:6.1f}/{task.total:.0f} s"),
-        BarColumn(),
-        TimeElapsedColumn(),
-        TextColumn("{task.fields[status]}"),
-    )
-    next_log = time.monotonic()
-    with Progress(*columns, console=console, disable=not console.is_terminal) as bar:
-        task = bar.add_task("mission", total=cap_s, status="starting")
+    next_log = start
+
+    def panel() -> object:
+        row = sampler.rows[-1] if sampler.rows else None
+        return mission_panel(monitor, config.sim.world, cap_s, time.monotonic() - start, row)
+
+    with Live(panel(), console=console, refresh_per_second=4,
+              auto_refresh=False) if console.is_terminal else _NoLive() as live:
         while True:
             monitor.pump(timeout=0.2)
             dead = {} if group is None else {
@@ -197,15 +216,30 @@ def _watch(
                 last_tick, last_change = tick, now
             elif now - last_change > stall_timeout_s:
                 raise MissionError(f"no clock tick for {stall_timeout_s:.0f} s (at tick {tick})")
-            status = _status_line(monitor)
-            bar.update(task, completed=min(monitor.sim_time_s, cap_s), status=status)
-            if not console.is_terminal and now >= next_log:
-                log.info("sim %.1f/%.0f s  %s", monitor.sim_time_s, cap_s, status)
-                next_log = now + 5.0
+            if now >= next_log:
+                if live is not None:
+                    live.update(panel(), refresh=True)
+                    next_log = now + 0.25
+                else:
+                    row = sampler.rows[-1] if sampler.rows else None
+                    log.info("sim %.1f/%.0f s  %s", monitor.sim_time_s, cap_s,
+                             status_line(monitor, row))
+                    next_log = now + 5.0
             if monitor.complete_tick is not None:
                 return True
-            if monitor.sim_time_s >= cap_s - 0.5 * config.sim.tick_s:
+            if monitor.sim_time_s >= cap_s - 0.5 * config.sim.tick_s or (
+                    stop is not None and stop.is_set()):
                 return False
+
+
+class _NoLive:
+    """Stands in for rich's Live when the output is no terminal."""
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, *exc: object) -> None:
+        return None
 
 
 def _halt(group: ProcessGroup, name: str, grace_s: float = 10.0) -> None:
@@ -277,11 +311,3 @@ def _live_fields(
         },
         "sample_every_s": sample_every_s,
     }
-
-
-def _status_line(monitor: Monitor) -> str:
-    known = monitor.series[-1].known_cells if monitor.series else 0
-    area = known * (monitor.grid.resolution_m**2 if monitor.grid else 0.0)
-    frontiers = len(monitor.frontiers.frontiers) if monitor.frontiers else 0
-    states = " ".join(f"r{i}:{t.state or '-'}" for i, t in monitor.tracks.items())
-    return f"known {area:6.1f} m²  frontiers {frontiers:3d}  {states}"

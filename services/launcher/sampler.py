@@ -14,7 +14,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -104,6 +104,12 @@ def series_row(probe: Probe, cloud: m.Cloud, robot_points: Sequence[np.ndarray],
     }
 
 
+class SampleSink(Protocol):
+    """A reader of each time-series row and the merged cloud it was scored on."""
+
+    def on_sample(self, row: dict[str, Any], cloud: m.Cloud) -> None: ...
+
+
 class CoverageSampler:
     """Samples the merged map and the robots' own maps every `every_s` sim seconds on its
     own thread."""
@@ -111,6 +117,7 @@ class CoverageSampler:
     def __init__(self, monitor: Monitor, probe: Probe, every_s: float, tick_s: float) -> None:
         self.monitor, self.probe, self.every_s, self.tick_s = monitor, probe, every_s, tick_s
         self.rows: list[dict[str, Any]] = []
+        self.sinks: list[SampleSink] = []
         self.quality = LiveQuality(probe)
         self._scoring = threading.Lock()  # the final map is added from the main thread
         self._stop = threading.Event()
@@ -164,3 +171,5 @@ class CoverageSampler:
         if self.rows and row["sim_time_s"] == self.rows[-1]["sim_time_s"]:
             self.rows.pop()  # the same edge tick answered twice: keep the newer view
         self.rows.append(row)
+        for sink in self.sinks:
+            sink.on_sample(row, cloud)
