@@ -7,7 +7,13 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from services.evaluator.explain import explain_robot, goal_spans, markdown, state_times
+from services.evaluator.explain import (
+    explain_robot,
+    goal_spans,
+    markdown,
+    revisits,
+    state_times,
+)
 from services.launcher.report import ordered_events
 
 TICK_S = 0.1
@@ -78,3 +84,20 @@ def test_events_are_ordered_by_tick_not_arrival() -> None:
     assert [(e["tick"], e["kind"]) for e in out] == [(10, "goal"), (40, "status"),
                                                      (40, "goal")]
     assert all(e["robot"] == 0 for e in out)
+
+
+def test_revisits_count_reached_goals_at_a_place_reached_before() -> None:
+    def goal(tick: int, robot: int, goal_id: int, x: float, y: float) -> dict:
+        return {**_goal(tick, goal_id), "robot": robot, "x": x, "y": y}
+
+    def status(tick: int, robot: int, goal_id: int, s: str) -> dict:
+        return {**_status(tick, goal_id, s), "robot": robot}
+
+    events = [goal(10, 0, 0, 1.0, 1.0), status(20, 0, 0, "reached"),
+              goal(10, 1, 1, 1.2, 1.0), status(30, 1, 1, "reached"),  # teammate, same place
+              goal(40, 0, 2, 3.0, 1.0), status(50, 0, 2, "invalid"),
+              goal(60, 0, 3, 3.0, 1.1), status(70, 0, 3, "reached"),  # first reach there
+              goal(80, 1, 4, 1.0, 1.4), status(90, 1, 4, "reached")]  # back again
+    assert revisits(events) == (2, 4)
+    assert revisits(events, radius_m=0.1) == (0, 4)
+    assert revisits([]) == (0, 0)

@@ -115,7 +115,7 @@ def redraw_plots(run_dir: Path, metrics: dict[str, Any]) -> None:
 
 def explain_run_folder(run_dir: Path) -> str:
     """`spacemap eval --explain`: where each robot's time and distance went (markdown)."""
-    from services.evaluator.explain import explain_events, markdown
+    from services.evaluator.explain import explain_events, markdown, revisits
 
     path = run_dir / rf.EVENTS
     if not path.exists():
@@ -124,6 +124,9 @@ def explain_run_folder(run_dir: Path) -> str:
     live = rf.read_json(run_dir / rf.LIVE)
     end_tick = round(float(live["sim_time_s"]) / config.sim.tick_s)
     tracks = load_tracks(run_dir, config.sim.robots)
-    per_robot = explain_events(rf.read_events(path), tracks, end_tick, config.sim.tick_s)
-    return markdown(per_robot)
+    events = rf.read_events(path)
+    per_robot = explain_events(events, tracks, end_tick, config.sim.tick_s)
+    again, reached = revisits(events)
+    return markdown(per_robot) + (f"\nReached goals at a place (0.5 m) reached before: {again} "
+                                  f"of {reached}\n")
 

@@ -139,6 +139,19 @@ def markdown(per_robot: dict[int, RobotExplain]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def revisits(events: Sequence[dict[str, Any]], radius_m: float = 0.5) -> tuple[int, int]:
+    """(reached goals within `radius_m` of a goal reached earlier by any robot, reached goals):
+    trips back to a place a visit did not clear."""
+    where = {(e["robot"], e["goal_id"]): (float(e["x"]), float(e["y"]))
+             for e in events if e["kind"] == "goal" and not e.get("cancel")}
+    reached = [where[key] for e in sorted(events, key=lambda e: int(e["tick"]))
+               if e["kind"] == "status" and e["status"] == "reached"
+               and (key := (e["robot"], e["goal_id"])) in where]
+    xy = np.array(reached).reshape(-1, 2)
+    again = sum(bool((np.hypot(*(xy[:i] - xy[i]).T) < radius_m).any()) for i in range(len(xy)))
+    return again, len(xy)
+
+
 def explain_events(events: Sequence[dict[str, Any]],
                    tracks: Sequence[tuple[np.ndarray, np.ndarray]], end_tick: int,
                    tick_s: float) -> dict[int, RobotExplain]:
