@@ -42,7 +42,7 @@ class EdgeConfig(BaseModel):
     unexplored_min_voxels: int = Field(
         default=30, ge=1, description="smaller F_u regions (< 0.075 m² of 5 cm voxels) are not "
         "worth a trip: with 8, half the goals of a house mission revisited uncleared specks "
-        "(docs/edge.md, \"Region size\")")
+        "(docs/edge.md, \"Coordinated space and the endgame\")")
     weak_min_voxels: int = Field(default=25, ge=1)
     unexplored_unknown_m: float = Field(
         default=0.5, ge=0, description="an F_u region is worth visiting only this close (xy) to "
@@ -54,7 +54,7 @@ class EdgeConfig(BaseModel):
     importance_xi_s: float = Field(default=-400.0, description="ξ, s")
     revenue_kappa: float = Field(default=1.0, gt=0, description="κ, 1/m")
     revenue_min_path_m: float = Field(default=0.5, gt=0, description="h floor, m")
-    # coordinated space (coordination.py; evidence: docs/edge.md, "Coordinated space")
+    # coordinated space (coordination.py; docs/edge.md, "Coordinated space and the endgame")
     space_view_radius_m: float = Field(
         default=1.5, ge=0, description="regions this close to f′ are seen from it; a teammate's "
         "goal this close discounts them")
@@ -63,7 +63,7 @@ class EdgeConfig(BaseModel):
     space_reached_final: bool = Field(
         default=True, description="a reached goal's place is set aside for good (with 100 "
         "ticks, 20-38 of 57-77 reached goals of a house mission went back to a place already "
-        "reached: docs/edge.md, \"Coordinated space\")")
+        "reached: docs/edge.md, \"Coordinated space and the endgame\")")
     space_look_at_region: bool = Field(default=False, description="goals carry the region's "
                                        "centroid: the robot faces it before reporting reached")
     nav_v_mps: float = Field(default=0.5, gt=0, description="the agents' max_v_mps (the "

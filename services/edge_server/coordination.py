@@ -2,7 +2,7 @@
 
 The paper's revenue U = I_t·I_g / (κ·h) scores each region alone, by metres, and each robot
 takes its maximum. The default `space` planner keeps I_t and I_g and changes what they are
-weighed against (choices and evidence: docs/edge.md, "Coordinated space"):
+weighed against (choices and evidence: docs/edge.md, "Coordinated space and the endgame"):
 
 - **View information**: a goal f′ is worth the I_t·I_g of every region whose centroid lies
   within `view_radius_m` of it (one stop sees all of them), not of its own region alone.
