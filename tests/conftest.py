@@ -40,6 +40,7 @@ def processes_tagged(run_logs: Path) -> list[int]:
     return pids
 
 
+@pytest.hookimpl(trylast=True)  # after -k/-m deselection: no build for deselected tests
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     # the docker tests run last; their image build starts now and overlaps the rest
     from tests import docker_build

@@ -48,6 +48,9 @@ class Build:
         return self.log.read_text(errors="replace")[-chars:]
 
     def stop(self) -> None:
+        """End the build if it still runs; drop its log when it succeeded."""
+        if self.proc.poll() == 0:
+            self.log.unlink(missing_ok=True)
         if self.proc.poll() is None:
             os.killpg(self.proc.pid, signal.SIGTERM)
             try:
