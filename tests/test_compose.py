@@ -112,6 +112,16 @@ def test_dockerfile() -> None:
     assert "wheelhouse" not in ignored and ".venv" in ignored
 
 
+def test_sim_waits_for_every_watcher() -> None:
+    """The clock starts only when the edge, the agents and the recorder are on the bus: a
+    recorder that joined late would miss the mission's start (seen: a 10 s mission over before
+    the recorder had built its ground truth)."""
+    deps = SERVICES["sim"]["depends_on"]
+    for name in ("edge", "agent", "recorder"):
+        assert deps[name] == {"condition": "service_healthy"}, name
+        assert "healthcheck" in SERVICES[name], name
+
+
 def test_one_variable_sets_the_fleet() -> None:
     """SPACEMAP_ROBOTS sizes the logins, the simulated fleet and the agent replicas together;
     SPACEMAP_WORLD picks the world; the README documents both."""

@@ -140,8 +140,11 @@ def test_compose_up_runs_the_mission(project: Project, tmp_path: Path) -> None:
     assert metrics["sim_time_s"] >= SIM_TIME_S - 1 or metrics["completed"], metrics
     assert metrics["coverage_3d_pct"] > COVERAGE_3D_FLOOR, metrics["coverage_3d_pct"]
     assert metrics["total_distance_m"] > 1.0, metrics["total_distance_m"]
-    for robot in range(ROBOTS):  # every replica claimed its own robot id and wrote its log
+    for robot in range(ROBOTS):  # every replica's robot mapped, watched from the first tick
         assert (run_dir / f"robot_{robot}_map.ply").exists(), robot
+        stamps = [float(line.split()[0]) for line in
+                  (run_dir / f"trajectory_{robot}_gt.tum").read_text().splitlines()]
+        assert stamps[0] < 0.15 and stamps[-1] >= metrics["sim_time_s"] - 1, (robot, stamps[-1])
 
     # logs readable with `compose logs`: each agent replica logs its claimed robot id
     logs = project("logs", "--no-color", "agent").stdout
