@@ -8,7 +8,7 @@ PY=${PYTHON:-python3.11}
 command -v "$PY" >/dev/null 2>&1 || PY=python3
 
 need=()
-for pkg in libusb-1.0-0 libegl1 libgl1-mesa-dri libegl-mesa0 libosmesa6 iproute2; do
+for pkg in libusb-1.0-0 libgl1 libegl1 libgl1-mesa-dri libegl-mesa0 libosmesa6 iproute2; do
   dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || need+=("$pkg")
 done
 if ! "$PY" -m venv --help >/dev/null 2>&1 || ! "$PY" -c "import ensurepip" >/dev/null 2>&1; then

@@ -89,8 +89,10 @@ def credentials(
     """Create a login per process (sim, edge, monitor, agent-0..N-1) and the router's
     dictionary; point every service's bus.credentials at the folder."""
     from services.common.access import make_credentials
+    from services.common.fleet import reset_claims
 
     users = make_credentials(out, robots)
+    reset_claims(out)  # a fresh fleet: agent replicas claim their ids anew
     typer.echo(f"credentials for {', '.join(users)} in {out}")
 
 
@@ -125,17 +127,25 @@ def edge(
 
 @app.command()
 def agent(
-    robot: Annotated[int, typer.Option("--robot", min=0, help="robot id")],
+    robot: Annotated[str, typer.Option("--robot", help="robot id, or auto (replicas claim "
+                                       "the lowest free id in bus.credentials/claims)")],
     config: ConfigOpt = None,
     connect: ConnectOpt = None,
     set_: SetOpt = None,
     log_level: LogOpt = "INFO",
 ) -> None:
     """Run one robot agent alone."""
+    from services.common.fleet import resolve_robot
     from services.robot_agent.node import main
 
     _setup_logging(log_level)
-    main(service_config(config, connect, set_), robot)
+    cfg = service_config(config, connect, set_)
+    try:
+        robot_id = resolve_robot(robot, cfg.bus.credentials, cfg.sim.robots, claim=True)
+    except (ValueError, RuntimeError) as exc:
+        raise typer.BadParameter(str(exc)) from exc
+    logging.getLogger("spacemap.agent").info("robot id %s (--robot %s)", robot_id, robot)
+    main(cfg, robot_id)
 
 
 @app.command()
@@ -404,15 +414,26 @@ def health(
     ident: Annotated[str, typer.Option("--id", help="process id (robot id for agents)")] = "0",
     timeout: Annotated[float, typer.Option("--timeout", help="seconds")] = 3.0,
     login_as: Annotated[str, typer.Option(
-        "--as", help="user to log in as when bus.credentials is set")] = "monitor",
+        "--as", help="user to log in as when bus.credentials is set; auto: the probed "
+        "process's own")] = "monitor",
     config: ConfigOpt = None,
     connect: ConnectOpt = None,
     set_: SetOpt = None,
 ) -> None:
     """Exit 0 when the process is alive on the bus (for health checks), else 1."""
+    from services.common.access import identity
+    from services.common.fleet import resolve_robot
     from services.common.health import is_alive
 
     cfg = service_config(config, connect, set_)
+    if ident == "auto":  # this agent replica's claimed id
+        robot = resolve_robot(ident, cfg.bus.credentials, cfg.sim.robots, claim=False)
+        if robot is None:
+            typer.echo(f"{role}/auto: no robot id claimed yet", err=True)
+            raise typer.Exit(1)
+        ident = str(robot)
+    if login_as == "auto":
+        login_as = identity(role, ident)
     if not is_alive(cfg.bus, role, ident, timeout, login_as):
         typer.echo(f"{role}/{ident}: not alive on {cfg.bus.connect}", err=True)
         raise typer.Exit(1)

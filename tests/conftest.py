@@ -38,3 +38,17 @@ def processes_tagged(run_logs: Path) -> list[int]:
         if tag in environ and state != "Z":
             pids.append(int(entry.name))
     return pids
+
+
+@pytest.hookimpl(trylast=True)  # after -k/-m deselection: no build for deselected tests
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    # the docker tests run last; their image build starts now and overlaps the rest
+    from tests import docker_build
+
+    docker_build.schedule(config, items)
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    from tests import docker_build
+
+    docker_build.stop(config)

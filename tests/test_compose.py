@@ -1,7 +1,9 @@
-"""docker-compose.yml and the Dockerfile, checked statically (there is no Docker engine here).
+"""docker-compose.yml and the Dockerfile, checked statically (tests/test_compose_up.py runs
+them on a Docker engine).
 
 Every service's command and health check must parse as a real `spacemap` CLI invocation, and
-every environment variable must map to a field of the mission config.
+every environment variable must map to a field of the mission config; compose's `${VAR:-default}`
+variables are read with their defaults.
 """
 
 from __future__ import annotations
@@ -19,7 +21,9 @@ from services.cli import app
 from services.config import ENV_PREFIX, SpacemapConfig, load_config
 from tests.conftest import REPO
 
-COMPOSE = yaml.safe_load((REPO / "docker-compose.yml").read_text())
+VARIABLE = re.compile(r"\$\{([A-Z0-9_]+):-([^}]*)\}")
+COMPOSE_TEXT = (REPO / "docker-compose.yml").read_text()
+COMPOSE = yaml.safe_load(VARIABLE.sub(lambda m: m.group(2), COMPOSE_TEXT))
 SERVICES: dict[str, dict[str, Any]] = COMPOSE["services"]
 CLI = typer.main.get_command(app)
 
@@ -34,7 +38,7 @@ def parse_cli(argv: list[str]) -> Any:
 
 
 def test_topology() -> None:
-    assert {"router", "sim", "edge", "agent0", "agent1", "agent2"} <= set(SERVICES)
+    assert {"router", "sim", "edge", "agent", "recorder"} <= set(SERVICES)
     for name, service in SERVICES.items():
         for dep in service.get("depends_on", {}):
             assert dep in SERVICES, f"{name} depends on unknown {dep}"
@@ -46,7 +50,7 @@ def test_topology() -> None:
 def test_command_is_real_cli(name: str) -> None:
     ctx = parse_cli(SERVICES[name]["command"])
     if ctx.info_name == "agent":
-        assert ctx.params["robot"] == int(name.removeprefix("agent"))
+        assert ctx.params["robot"] == "auto"
 
 
 @pytest.mark.parametrize("name", sorted(n for n in SERVICES if "healthcheck" in SERVICES[n]))
@@ -82,17 +86,55 @@ def test_environment_maps_to_config(name: str) -> None:
 
 def test_dockerfile() -> None:
     text = (REPO / "Dockerfile").read_text()
-    assert re.search(r"^FROM python:3\.11", text, re.M)
-    for pkg in ("libusb-1.0-0", "libegl1", "libgl1-mesa-dri", "libosmesa6"):
+    # the base is a build argument, by default the public slim image
+    assert re.search(r"^ARG BASE=python:3\.11-slim-bookworm$", text, re.M)
+    assert re.findall(r"^FROM .*$", text, re.M) == ["FROM ${BASE}"]
+    assert not re.search(r"^# syntax=", text, re.M), "a frontend image would need a registry"
+    for pkg in ("libusb-1.0-0", "libgl1", "libegl1", "libgl1-mesa-dri", "libosmesa6"):
         assert pkg in text, f"Dockerfile does not install {pkg}"
-    for path in ("pyproject.toml", "schemas", "services"):
-        assert re.search(rf"^COPY .*\b{re.escape(path)}\b", text, re.M), path
-        assert (REPO / path).exists()
-    assert re.search(r"^RUN pip install .*\.$", text, re.M)
+        assert pkg in (REPO / "scripts" / "docker-base.sh").read_text(), pkg
+    # the wheelhouse and the source are bind-mounted, never copied into a layer
+    assert not re.search(r"^(COPY|ADD) ", text, re.M)
+    assert "--mount=type=bind,source=wheelhouse,target=/wheels" in text
+    for path in ("pyproject.toml", "README.md", "schemas", "services"):
+        assert f"--mount=type=bind,source={path},target=/src/{path}" in text, path
+    for path in ("pyproject.toml", "schemas", "services", "wheelhouse/README.md"):
+        assert (REPO / path).exists(), path
+    # offline: only the wheelhouse, never an index
+    assert text.count('OFFLINE" = 1 ]; then idx="--no-index"') == 2
+    assert text.count("--find-links /wheels") == 2
     entry = re.search(r"^ENTRYPOINT (\[.*\])", text, re.M)
     assert entry and yaml.safe_load(entry.group(1)) == ["spacemap"]
-    build = {s.get("build") for s in SERVICES.values()}
-    assert build == {"."} and (REPO / "Dockerfile").exists()
+    builds = [s.get("build") for s in SERVICES.values()]
+    assert all(b == {"context": ".", "args": {"BASE": "python:3.11-slim-bookworm"}}
+               for b in builds), builds
+    ignored = (REPO / ".dockerignore").read_text().split()
+    assert "wheelhouse" not in ignored and ".venv" in ignored
+
+
+def test_sim_waits_for_every_watcher() -> None:
+    """The clock starts only when the edge, the agents and the recorder are on the bus: a
+    recorder that joined late would miss the mission's start (seen: a 10 s mission over before
+    the recorder had built its ground truth)."""
+    deps = SERVICES["sim"]["depends_on"]
+    for name in ("edge", "agent", "recorder"):
+        assert deps[name] == {"condition": "service_healthy"}, name
+        assert "healthcheck" in SERVICES[name], name
+
+
+def test_one_variable_sets_the_fleet() -> None:
+    """SPACEMAP_ROBOTS sizes the logins, the simulated fleet and the agent replicas together;
+    SPACEMAP_WORLD picks the world; the README documents both."""
+    uses = {m.group(1): m.group(2) for m in VARIABLE.finditer(COMPOSE_TEXT)}
+    assert uses["SPACEMAP_ROBOTS"] == "3" and uses["SPACEMAP_WORLD"] == "house"
+    robots = re.findall(r"^\s*(.*)\$\{SPACEMAP_ROBOTS:-3\}", COMPOSE_TEXT, re.M)
+    assert any("--robots" in line for line in robots)
+    assert any("SPACEMAP__SIM__ROBOTS" in line for line in robots)
+    assert any("replicas" in line for line in robots)
+    assert SERVICES["agent"]["deploy"]["replicas"] == 3
+    readme = (REPO / "README.md").read_text()
+    for var in uses:
+        assert var in readme, f"README does not document {var}"
 
 
 def test_readme_documents_separate_hosts() -> None:
@@ -117,6 +159,8 @@ def test_logins() -> None:
         assert "credentials:/credentials" in service["volumes"], name
         test = service.get("healthcheck", {}).get("test", [])
         if "--as" in test:
-            role, ident = test[test.index("--role") + 1], test[test.index("--id") + 1]
-            assert test[test.index("--as") + 1] == (f"agent-{ident}" if role == "agent"
-                                                    else role), name
+            role, login = test[test.index("--role") + 1], test[test.index("--as") + 1]
+            ident = test[test.index("--id") + 1] if "--id" in test else "0"
+            expected = {"agent": "auto" if ident == "auto" else f"agent-{ident}",
+                        "router": "monitor"}.get(role, role)
+            assert login == expected, name
