@@ -6,57 +6,24 @@ import logging
 import os
 import time
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import typer
 
-from services.config import SpacemapConfig, load_config
+from services.cli_common import (
+    VIEW_TO_HELP,
+    ConfigOpt,
+    ConnectOpt,
+    LogOpt,
+    SetOpt,
+    parse_sets,
+    service_config,
+    setup_logging,
+)
+from services.cli_results import bench, eval_
+from services.config import load_config
 
 app = typer.Typer(add_completion=False, no_args_is_help=False, help=__doc__)
-
-ConfigOpt = Annotated[Path | None, typer.Option("--config", help="mission config YAML")]
-ConnectOpt = Annotated[
-    str | None, typer.Option("--connect", help="router endpoint, e.g. tcp/HOST:7447")
-]
-SetOpt = Annotated[
-    list[str] | None, typer.Option("--set", help="override a config field: section.field=value")
-]
-LogOpt = Annotated[str, typer.Option("--log-level", help="DEBUG, INFO, WARNING")]
-VIEW_TO_HELP = ("spawn[:PORT] (start a rerun viewer), serve[:PORT] (host a gRPC server that "
-                "`rerun rerun+http://HOST:PORT/proxy` opens) or a viewer's rerun+http:// URL")
-
-
-def _setup_logging(level: str) -> None:
-    logging.basicConfig(
-        level=getattr(logging, level.upper(), logging.INFO),
-        format="%(asctime)s %(processName)s %(name)s %(levelname)s: %(message)s",
-    )
-
-
-def _parse_sets(sets: list[str] | None) -> dict[str, Any]:
-    import yaml
-
-    out: dict[str, Any] = {}
-    for item in sets or []:
-        if "=" not in item:
-            raise typer.BadParameter(f"--set wants section.field=value, got {item!r}")
-        key, raw = item.split("=", 1)
-        out[key.strip()] = yaml.safe_load(raw)
-    return out
-
-
-def service_config(
-    config: Path | None, connect: str | None, sets: list[str] | None
-) -> SpacemapConfig:
-    """YAML, then environment, then --set and --connect."""
-    overrides = _parse_sets(sets)
-    if connect:
-        overrides["bus.connect"] = connect
-    try:
-        return load_config(config, overrides)
-    except (ValueError, OSError) as exc:
-        raise typer.BadParameter(str(exc)) from exc
-
 
 @app.command()
 def router(
@@ -75,7 +42,7 @@ def router(
     from services.common.router import run_router
     from services.common.signals import stop_on_signals
 
-    _setup_logging(log_level)
+    setup_logging(log_level)
     bus = service_config(config, None, set_).bus
     run_router(listen or ["tcp/0.0.0.0:7447"], stop_on_signals(), lease,
                credentials=bus.credentials, prefix=bus.prefix)
@@ -107,7 +74,7 @@ def sim(
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     from services.simulator.node import main
 
-    _setup_logging(log_level)
+    setup_logging(log_level)
     main(service_config(config, connect, set_))
 
 
@@ -121,7 +88,7 @@ def edge(
     """Run the edge server alone."""
     from services.edge_server.node import main
 
-    _setup_logging(log_level)
+    setup_logging(log_level)
     main(service_config(config, connect, set_))
 
 
@@ -138,7 +105,7 @@ def agent(
     from services.common.fleet import resolve_robot
     from services.robot_agent.node import main
 
-    _setup_logging(log_level)
+    setup_logging(log_level)
     cfg = service_config(config, connect, set_)
     try:
         robot_id = resolve_robot(robot, cfg.bus.credentials, cfg.sim.robots, claim=True)
@@ -215,8 +182,8 @@ def run(
     """Run a whole mission (router, simulator, edge, agents) to completion."""
     from services.launcher.run import MissionError, run_mission
 
-    _setup_logging(log_level)
-    overrides = _parse_sets(set_)
+    setup_logging(log_level)
+    overrides = parse_sets(set_)
     for key, value in (
         ("sim.robots", robots),
         ("sim.world", world),
@@ -269,98 +236,6 @@ def run(
         typer.echo(f"  {key}: {metrics.get(key)}")
 
 
-@app.command("eval")
-def eval_(
-    run_dir: Annotated[Path, typer.Argument(help="a finished run folder")],
-    out: Annotated[
-        Path | None, typer.Option("--out", help="write the metrics here (default RUN_DIR/"
-                                  "metrics_eval.json)")
-    ] = None,
-    plots: Annotated[bool, typer.Option("--plots", help="also redraw the PNG figures")] = False,
-    explain: Annotated[bool, typer.Option(
-        "--explain", help="only print where each robot's time and distance went")] = False,
-    log_level: LogOpt = "WARNING",
-) -> None:
-    """Recompute metrics.json from a finished run folder's files and compare."""
-    from services.evaluator.evaluate import (
-        evaluate_run_folder,
-        explain_run_folder,
-        redraw_plots,
-    )
-    from services.evaluator.run_files import METRICS, read_json, write_json
-
-    _setup_logging(log_level)
-    if not (run_dir / "config.yaml").exists():
-        raise typer.BadParameter(f"{run_dir} has no config.yaml: not a run folder")
-    if explain:
-        try:
-            typer.echo(explain_run_folder(run_dir), nl=False)
-        except FileNotFoundError as exc:
-            raise typer.BadParameter(str(exc)) from exc
-        return
-    metrics = evaluate_run_folder(run_dir)
-    write_json(out or run_dir / "metrics_eval.json", metrics)
-    if plots:
-        redraw_plots(run_dir, metrics)
-    recorded = read_json(run_dir / METRICS) if (run_dir / METRICS).exists() else {}
-    for key, value in metrics.items():
-        mark = "" if key not in recorded or recorded[key] == value else (
-            f"   (metrics.json: {recorded[key]})")
-        typer.echo(f"{key}: {value}{mark}")
-
-
-def _csv_list(text: str, cast: type = str) -> tuple:
-    return tuple(cast(v.strip()) for v in text.split(",") if v.strip())
-
-
-@app.command()
-def bench(
-    quick: Annotated[bool, typer.Option("--quick", help="house, 3 robots, all methods, "
-                                        "seeds 0,1, 150 s cap (10 runs, 15-25 min here); "
-                                        "default: house, bookstore, AWS house × 3, 6 "
-                                        "robots × all methods × seeds 0-2, 600 s")] = False,
-    worlds: Annotated[str | None, typer.Option("--worlds", help="names or MJCF paths, "
-                                               "comma-separated")] = None,
-    robots: Annotated[str | None, typer.Option("--robots", help="e.g. 3,6")] = None,
-    methods: Annotated[str | None, typer.Option(
-        "--methods", help="standalone,space,nearest,utility,rrt")] = None,
-    seeds: Annotated[str | None, typer.Option("--seeds", help="e.g. 0,1,2")] = None,
-    sim_time: Annotated[float | None, typer.Option("--sim-time", help="cap per run, s")] = None,
-    sample_every: Annotated[float | None, typer.Option(
-        "--sample-every", help="coverage sample period, sim s")] = None,
-    out: Annotated[Path | None, typer.Option("--out", help="bench folder")] = None,
-    config: ConfigOpt = None,
-    set_: SetOpt = None,
-    log_level: LogOpt = "WARNING",
-) -> None:
-    """Run the worlds × robots × methods × seeds matrix; write Tables I and II and Fig. 5."""
-    from dataclasses import replace
-
-    from services.launcher.bench import QUICK, full_spec, run_bench
-
-    _setup_logging(log_level)
-    spec = QUICK if quick else full_spec()
-    changes: dict[str, Any] = {}
-    for name, text, cast in (("worlds", worlds, str), ("robots", robots, int),
-                             ("methods", methods, str), ("seeds", seeds, int)):
-        if text:
-            changes[name] = _csv_list(text, cast)
-    if sim_time is not None:
-        changes["sim_time_s"] = sim_time
-    if sample_every is not None:
-        changes["sample_every_s"] = sample_every
-    spec = replace(spec, **changes)
-    base = service_config(config, None, set_)
-    out_dir = out or Path("bench_runs") / time.strftime("%Y%m%d-%H%M%S")
-    try:
-        records = run_bench(spec, base, out_dir)
-    except ValueError as exc:
-        raise typer.BadParameter(str(exc)) from exc
-    failed = sum("failed" in r for r in records)
-    typer.echo(f"bench folder: {out_dir} ({len(records)} runs, {failed} failed)")
-    typer.echo((out_dir / "tables.md").read_text())
-
-
 @app.command()
 def record(
     out: Annotated[Path, typer.Option("--out", help="run folder to write")],
@@ -374,7 +249,7 @@ def record(
     """Watch a mission started elsewhere (other hosts, docker compose); write its run folder."""
     from services.launcher.run import MissionError, record_mission
 
-    _setup_logging(log_level)
+    setup_logging(log_level)
     try:
         result = record_mission(service_config(config, connect, set_), out,
                                 sample_every_s=sample_every)
@@ -399,7 +274,7 @@ def view(
     from services.launcher.run import MissionError
     from services.launcher.view import watch_mission
 
-    _setup_logging(log_level)
+    setup_logging(log_level)
     _check_view(to)
     try:
         watch_mission(service_config(config, connect, set_), to, save, sample_every)
@@ -455,3 +330,8 @@ def inventory(
 
     cfg = service_config(config, connect, set_)
     typer.echo(json.dumps(collect_inventories(cfg.bus, robots, timeout), indent=1))
+
+
+# results commands live in their own module (services/cli_results.py)
+app.command("eval")(eval_)
+app.command()(bench)
