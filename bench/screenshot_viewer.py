@@ -33,6 +33,7 @@ import io
 import logging
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -198,14 +199,38 @@ def spawn_viewer(size: str, port: int, workdir: Path) -> subprocess.Popen[bytes]
     log.info("starting %s", " ".join(cmd))
     env = dict(os.environ, XDG_RUNTIME_DIR=str(workdir))  # wgpu's probe asks for one
     with open(workdir / "viewer.log", "wb") as out:
-        return subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=env)
+        # its own process group: a pip-installed `rerun` is a Python launcher that runs the
+        # viewer binary as a child, which outlives a signal sent to the launcher alone
+        return subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=env,
+                                start_new_session=True)
+
+
+def stop_viewer(proc: subprocess.Popen[bytes], grace_s: float = 10.0) -> None:
+    """SIGTERM the viewer's process group (launcher and binary), SIGKILL what is left."""
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            break
+        try:
+            proc.wait(timeout=grace_s)
+        except subprocess.TimeoutExpired:
+            continue
+        deadline = time.monotonic() + grace_s
+        while time.monotonic() < deadline:  # the binary may outlive the launcher briefly
+            try:
+                os.killpg(proc.pid, 0)
+            except ProcessLookupError:
+                return
+            time.sleep(0.2)
+    proc.poll()
 
 
 def viewer_failure(proc: subprocess.Popen[bytes], workdir: Path) -> ScreenshotError:
     text = (workdir / "viewer.log").read_text(errors="replace")
     hint = ""
-    if "graphics adapter" in text.lower() or "vulkan" in text.lower():
-        hint = (" — no graphics adapter: install a Vulkan driver "
+    if any(sign in text.lower() for sign in ("graphics adapter", "render context", "vulkan")):
+        hint = (" — no usable graphics adapter: install a Vulkan driver "
                 "(Debian: apt-get install mesa-vulkan-drivers)")
     return ScreenshotError(f"the rerun viewer exited with {proc.returncode}{hint}; its log:\n"
                            + text[-3000:])
@@ -284,12 +309,7 @@ def take_screenshots(run_dir: Path, out_dir: Path, prefix: str, size: str,
                 written.append(path)
             return written
         finally:
-            proc.terminate()
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+            stop_viewer(proc)
 
 
 def main() -> None:
