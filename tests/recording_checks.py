@@ -54,3 +54,23 @@ def rrd_entities(path: Path) -> tuple[dict[str, int], tuple[float, float] | None
             if len(ns):
                 lo, hi = min(lo, ns.min() * 1e-9), max(hi, ns.max() * 1e-9)
     return dict(rows), ((lo, hi) if np.isfinite(lo) else None)
+
+
+
+def rrd_blueprint_views(path: Path) -> tuple[str, set[tuple[str, str, str]]] | None:
+    """(application id, {(view class, name, origin)}) of the .rrd's first blueprint store,
+    or None when the file holds no blueprint."""
+    reader = RrdReader(path)
+    stores = reader.blueprints()
+    if not stores:
+        return None
+    views: set[tuple[str, str, str]] = set()
+    for chunk in reader.stream(store=stores[0]).to_chunks():
+        batch = chunk.to_record_batch()
+        if "ViewBlueprint:class_identifier" not in batch.schema.names:
+            continue
+        for row in batch.to_pylist():
+            views.add((row["ViewBlueprint:class_identifier"][0],
+                       row["ViewBlueprint:display_name"][0],
+                       row["ViewBlueprint:space_origin"][0]))
+    return stores[0].application_id, views

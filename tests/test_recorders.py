@@ -26,6 +26,7 @@ from tests.recording_checks import (
     grid_cells,
     mcap_messages,
     pose_xyyaw,
+    rrd_blueprint_views,
     rrd_entities,
 )
 
@@ -164,6 +165,18 @@ def test_rrd_loads_back_with_the_expected_entities_and_time_range(recorded) -> N
         assert rows.get(entity, 0) > 0, entity
     assert rows["/world/robots/0"] == 40  # every pose, sent in column batches
     assert span is not None and span[0] == 0.0 and math.isclose(span[1], 3.9)
+
+
+def test_rrd_holds_the_default_blueprint(recorded) -> None:
+    """`rerun mission.rrd` opens on spacemap's layout: the blueprint travels in the file."""
+    out, _ = recorded
+    found = rrd_blueprint_views(out / RRD_NAME)
+    assert found is not None
+    app_id, views = found
+    assert app_id == "spacemap"
+    assert {("3D", "map (3D)", "world"), ("2D", "grid (2D)", "grid"),
+            ("TimeSeries", "coverage (%)", "plots"), ("TextLog", "goal events", "events"),
+            ("2D", "camera 0", "cameras/0"), ("2D", "camera 1", "cameras/1")} <= views
 
 
 def test_a_failing_recorder_is_dropped_and_counted_the_others_go_on() -> None:

@@ -4,7 +4,8 @@
 Entity tree: `world/` (3D, z up: `map/cloud`, `robots/{i}` pose with a box body,
 `trajectories/{i}/estimate|ground_truth`, `frontiers/unexplored|weak`, `goals`), `grid/`
 (2D: `image` of the merged grid, `frontiers`, `robots`), `cameras/{i}/rgb|depth`, `plots/`
-(coverage and BV time series) and `events` (goals and statuses as text).
+(coverage and BV time series) and `events` (goals and statuses as text). `blueprint` lays
+them out in the viewer.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from typing import Any, Literal
 
 import numpy as np
 import rerun as rr
+import rerun.blueprint as rrb
 
 from schemas import messages as m
 
@@ -27,10 +29,17 @@ CLASS_RGB = {"unexplored": (255, 140, 0), "weak": (153, 51, 230)}
 GOAL_RGB = (26, 204, 51)
 PLOTS = ("coverage_3d_pct", "coverage_2d_pct", "bounding_volume_pct", "overlap_3d_pct",
          "known_area_m2", "frontiers")
+PERCENT_PLOTS = PLOTS[:4]
 
 
 def robot_rgb(robot: int) -> np.ndarray:
     return ROBOT_RGB[robot % len(ROBOT_RGB)]
+
+
+def light_rgb(robot: int, white: float = 0.45) -> np.ndarray:
+    """The robot's colour mixed with `white` of white."""
+    rgb = robot_rgb(robot).astype(np.float64)
+    return np.rint(rgb + (255.0 - rgb) * white).astype(np.uint8)
 
 
 def height_rgb(z: np.ndarray, lo: float = 0.0, hi: float = 2.5) -> np.ndarray:
@@ -94,11 +103,14 @@ def trajectory(robot: int, xyyaw: Sequence[tuple[float, float, float]], which: s
     step = max(step, 1)
     picked = list(xyyaw[::step]) + ([xyyaw[-1]] if (len(xyyaw) - 1) % step else [])
     xy = np.asarray(picked, dtype=np.float32)[:, :2]
-    z = 0.02 if which == "estimate" else 0.01
+    # above the map's floor points (radius 0.025 at z ~ 0), which hid lines at 1-2 cm; the
+    # estimate in a light tint of the robot's colour, which also colours the floor it saw
+    estimate = which == "estimate"
+    z = 0.08 if estimate else 0.06
     strip = np.column_stack([xy, np.full(len(xy), z, dtype=np.float32)])
-    rgb = robot_rgb(robot) if which == "estimate" else np.array([90, 90, 90], np.uint8)
+    rgb = light_rgb(robot) if estimate else np.array([90, 90, 90], np.uint8)
     return [(f"world/trajectories/{robot}/{which}",
-             rr.LineStrips3D([strip], colors=[rgb], radii=0.015))]
+             rr.LineStrips3D([strip], colors=[rgb], radii=0.03 if estimate else 0.02))]
 
 
 def grid_image(grid: m.OccupancyGrid) -> list[Entity]:
@@ -176,3 +188,39 @@ def event(robot: int, msg: m.Goal | m.GoalStatus) -> list[Entity]:
     else:
         text = f"robot {robot}: goal #{msg.goal_id} {msg.status} {msg.reason}".rstrip()
     return [("events", rr.TextLog(text))]
+
+
+def blueprint(robots: int) -> rrb.Blueprint:
+    """The viewer's layout of a mission: the 3D map with robots, trajectories, frontiers and
+    goals (left, the largest), the 2D grid with frontiers and robots, the coverage curves (%)
+    and, in tabs, the frontier count and known area, the goal events and each robot's camera
+    (logged with a live view only). The time panel shows `sim_time` and follows the latest
+    data, so a finished recording opens at its end."""
+    cameras = [rrb.Spatial2DView(origin=f"cameras/{i}", name=f"camera {i}")
+               for i in range(robots)]
+    # the curves from the start of the mission to the time cursor (rerun's default is a
+    # window around the cursor), the legend where the curves are not: top left
+    from_start = rrb.TimeAxis(view_range=rr.TimeRange(
+        start=rrb.TimeRangeBoundary.absolute(seconds=0.0),
+        end=rrb.TimeRangeBoundary.cursor_relative()))
+    legend = rrb.PlotLegend(corner="LeftTop")
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial3DView(origin="world", name="map (3D)"),
+            rrb.Vertical(
+                rrb.Spatial2DView(origin="grid", name="grid (2D)"),
+                rrb.TimeSeriesView(origin="plots", name="coverage (%)",
+                                   contents=[f"plots/{key}" for key in PERCENT_PLOTS],
+                                   axis_x=from_start, plot_legend=legend),
+                rrb.Tabs(
+                    rrb.TimeSeriesView(origin="plots", name="frontiers, known area (m²)",
+                                       contents=["plots/frontiers", "plots/known_area_m2"],
+                                       axis_x=from_start, plot_legend=legend),
+                    rrb.TextLogView(origin="events", name="goal events"),
+                    *cameras),
+                row_shares=[5, 3, 2]),
+            column_shares=[3, 2]),
+        rrb.TimePanel(timeline="sim_time", play_state="following"),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+    )

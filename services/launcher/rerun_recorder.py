@@ -1,7 +1,8 @@
 """mission.rrd and the live rerun view: one rerun recording stream whose sinks are the run
 folder's file and, with a live view, a spawned viewer, a gRPC server or a remote viewer.
 
-Timelines: `sim_time` (duration, s) and `tick` (sequence). The converters are in
+Timelines: `sim_time` (duration, s) and `tick` (sequence); the file and the live view both
+get the default layout `rerun_convert.blueprint`. The converters are in
 `rerun_convert` (pure); this class keeps only throttles and the last robot positions.
 """
 
@@ -52,7 +53,9 @@ class RerunRecorder:
         sinks: list[Any] = [rr.FileSink(path)] if path is not None else []
         if view is not None:
             sinks += view_sinks(view)
-        self.rec.set_sinks(*sinks)
+        # the layout (`rerun_convert.blueprint`) goes with the data to every sink, so
+        # `rerun mission.rrd` opens on the map, grid and curves rather than rerun's guess
+        self.rec.set_sinks(*sinks, default_blueprint=rc.blueprint(robots))
         self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         for robot in range(robots):
             self._log(rc.robot_body(robot), static=True)
