@@ -138,8 +138,27 @@ def test_registrations_that_agree_bring_a_wrong_estimate_back() -> None:
 
 
 def test_registrations_that_disagree_stay_rejected() -> None:
-    tell = [np.array([0.0, 0.0, 0.05]), np.array([0.06, 0.0, 0.05]), np.array([0.0, 0.0, 0.02])]
-    assert not agree(tell, PARAMS)
-    assert agree([np.array([0.01, 0.0, 0.050]), np.array([0.0, 0.01, 0.052]),
-                  np.array([0.0, 0.0, 0.049])], PARAMS)
-    assert not agree(tell[:2], PARAMS)  # too few
+    still = [np.zeros(3)] * 3  # the wheels report no motion
+    slide = [np.array([0.0, 0.0, 0.05]), np.array([0.06, 0.0, 0.05]), np.array([0.0, 0.0, 0.02])]
+    assert not agree(slide, still, PARAMS)
+    steady = [np.array([0.01, 0.0, 0.050]), np.array([0.0, 0.01, 0.052]),
+              np.array([0.0, 0.0, 0.049])]
+    assert agree(steady, still, PARAMS)
+    assert not agree(steady[:2], still[:2], PARAMS)  # too few
+
+
+def _turn(scale: float) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Registrations of a robot turning in place 9° a frame, its wheels reading `scale` more,
+    after a 2° yaw error it already carries: each registration asks for more of it back."""
+    odom = [np.array([1.0, 2.0, math.radians(9.0 * k) * (1 + scale)]) for k in range(3)]
+    true = [np.array([1.0, 2.0, math.radians(9.0 * k - 2.0)]) for k in range(3)]
+    return true, odom
+
+
+def test_registrations_asking_for_a_turn_the_wheels_lost_agree_at_its_rate() -> None:
+    regs, odom = _turn(0.05)  # 0.9° more lost by the last frame: beyond the fixed tolerance
+    assert not agree(regs, odom, PARAMS)
+    rate = FilterParams(reacquire_rad_per_rad=0.06)
+    assert agree(regs, odom, rate)
+    slid = [r + np.array([0.02 * k, 0.0, 0.0]) for k, r in enumerate(regs)]  # 2 cm a frame
+    assert not agree(slid, odom, rate)  # the wheels did not move: a slide, not a lost turn

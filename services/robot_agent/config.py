@@ -75,6 +75,18 @@ class AgentConfig(BaseModel):
         default="filter", description="fuse registration with odometry by a Kalman filter on "
         "the pose (drift_filter.py) or accept it within the jump gate"
     )
+    # 0.03 (3 × the 1 % turn-scale error): the lost turn of docs/agent.md re-acquired, bookstore
+    # seed 2 BV 18.2 % → 0.05 %; house seeds 0-4 and AWS seeds 0-1 unchanged (never fires)
+    reg_reacquire_rad_per_rad: float = Field(
+        default=0.03, ge=0, description="re-acquisition: how far (rad per rad turned) the "
+        "drift rejected registrations imply may change between them (odometry turn error)")
+    reg_sigma_m: float = Field(
+        default=0.005, gt=0, description="σ of one registration along its strong directions, m")
+    reg_sigma_rad: float = Field(
+        default=0.002, gt=0, description="σ of one registration's yaw, rad")
+    reg_coupled_length_m: float = Field(
+        default=0.0, ge=0, description="> 0: a registration's covariance from its whole planar "
+        "information, yaw compared at this lever arm (drift_filter.measurement_cov)")
     reg_min_points: int = Field(
         default=30, ge=10, description="points a frame needs (after 8 cm voxels) to register"
     )

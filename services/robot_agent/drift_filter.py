@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from services.common.geometry import wrap_angle
+from services.common.geometry import T_from_xyyaw, wrap_angle, xyyaw_from_T
 
 
 @dataclass(frozen=True)
@@ -42,6 +42,11 @@ class FilterParams:
     reacquire_frames: int = 3
     reacquire_tol_m: float = 0.03
     reacquire_tol_rad: float = 0.005
+    # ... plus this much per radian turned and per metre driven between two of them: odometry
+    # loses a turn at its own rate (1 % scale, random walk), so during a turn the drift the
+    # registrations imply grows frame by frame (docs/agent.md, "A reproducible turn lost")
+    reacquire_rad_per_rad: float = 0.0
+    reacquire_m_per_m: float = 0.0
 
 
 def predict(P: np.ndarray, xyyaw_from: np.ndarray, xyyaw_to: np.ndarray,
@@ -137,21 +142,38 @@ def fuse(xyyaw_guess: np.ndarray, P: np.ndarray, xyyaw_meas: np.ndarray, R: np.n
     return Fusion(xyyaw, P_new, d2, True)
 
 
-def agree(xyyaw_loc_odom: list[np.ndarray], params: FilterParams) -> bool:
-    """Whether rejected registrations, each as the T_loc_odom it implies, tell one story.
+def agree(xyyaw_reg: list[np.ndarray], xyyaw_odom: list[np.ndarray],
+          params: FilterParams) -> bool:
+    """Whether rejected registrations (T_loc_base, x, y, yaw) tell one story with odometry.
 
     The gate rejects a registration far from the estimate; when the estimate is what went
     wrong (a slide accepted earlier, odometry that turned more than modelled), every later
-    registration is rejected too, and the map is built at a wrong pose. Registrations that
-    agree with each other on the drift, frame after frame, while the estimate does not, are
-    the evidence that the estimate is off (house and AWS replays: 2.6-5.3° of yaw error held
-    by the gate while each registration asked for it back, within 0.15° of each other)."""
+    registration is rejected too, and the map is built at a wrong pose. Registrations whose
+    relative motions match the odometry's between them, frame after frame, while the estimate
+    does not, are the evidence that the estimate is off (house and AWS replays: 2.6-5.3° of
+    yaw error held by the gate while each registration asked for it back, within 0.15° of
+    each other). A slide in progress moves the registrations while the wheels do not."""
     n = params.reacquire_frames
-    if n <= 0 or len(xyyaw_loc_odom) < n:
+    if n <= 0 or len(xyyaw_reg) < n:
         return False
-    last = np.asarray(xyyaw_loc_odom[-n:], float)
-    dxy = last[:, None, :2] - last[None, :, :2]
-    dyaw = np.abs(wrap_angle(last[:, None, 2] - last[None, :, 2]))
-    return bool(np.hypot(dxy[..., 0], dxy[..., 1]).max() <= params.reacquire_tol_m
-                and dyaw.max() <= params.reacquire_tol_rad)
+    regs = [T_from_xyyaw(*r) for r in xyyaw_reg[-n:]]
+    odoms = np.asarray(xyyaw_odom[-n:], float)
+    turned = np.concatenate([[0.0], np.cumsum(np.abs(wrap_angle(np.diff(odoms[:, 2]))))])
+    driven = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(odoms[:, :2], axis=0).T))])
+    for i in range(n):
+        for j in range(i + 1, n):
+            odom_ij = T_from_xyyaw(*(_relative(odoms[i], odoms[j])))
+            ex, ey, eyaw = xyyaw_from_T(np.linalg.inv(odom_ij) @ np.linalg.inv(regs[i]) @ regs[j])
+            tol_m = params.reacquire_tol_m + params.reacquire_m_per_m * (driven[j] - driven[i])
+            tol_rad = params.reacquire_tol_rad + params.reacquire_rad_per_rad * (
+                turned[j] - turned[i])
+            if np.hypot(ex, ey) > tol_m or abs(wrap_angle(eyaw)) > tol_rad:
+                return False
+    return True
 
+
+def _relative(xyyaw_from: np.ndarray, xyyaw_to: np.ndarray) -> tuple[float, float, float]:
+    """(dx, dy, dyaw) from one planar pose to another, in the first's frame."""
+    c, s = np.cos(xyyaw_from[2]), np.sin(xyyaw_from[2])
+    wx, wy = xyyaw_to[0] - xyyaw_from[0], xyyaw_to[1] - xyyaw_from[1]
+    return c * wx + s * wy, -s * wx + c * wy, float(wrap_angle(xyyaw_to[2] - xyyaw_from[2]))

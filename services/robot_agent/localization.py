@@ -57,6 +57,10 @@ class RegistrationParams:
     # a Kalman filter on the pose (drift_filter.py) instead of the jump gate; frames it
     # rejects stay out of the map
     filter: FilterParams | None = None
+    # with the filter: an accepted frame joins the map only this far (m or rad) from the last
+    # frame that did (0 = every frame); fewer inserts, fewer registration errors built in
+    insert_min_m: float = 0.0
+    insert_min_rad: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -82,6 +86,7 @@ class FrameRegistrar:
         self.n_inserted = 0
         self.T_odom_accepted: np.ndarray | None = None  # odometry at the last accepted one
         self.n_accepted = 0
+        self.T_inserted: np.ndarray | None = None  # pose of the last frame inserted
 
     def _cloud(self, points_base: np.ndarray) -> small_gicp.PointCloud | None:
         pts = points_base[points_base[:, 2] > self.params.floor_z_m]
@@ -142,6 +147,15 @@ class FrameRegistrar:
     def insert(self, cloud: small_gicp.PointCloud, T_loc_base: np.ndarray) -> None:
         self.voxelmap.insert(cloud, T_loc_base)
         self.n_inserted += 1
+        self.T_inserted = T_loc_base
+
+    def moved_since_insert(self, T_loc_base: np.ndarray) -> bool:
+        """Whether a registered frame at this pose is far enough from the last one inserted."""
+        p = self.params
+        if self.T_inserted is None or (p.insert_min_m <= 0 and p.insert_min_rad <= 0):
+            return True
+        dx, dy, dyaw = xyyaw_from_T(invert(self.T_inserted) @ T_loc_base)
+        return bool(np.hypot(dx, dy) >= p.insert_min_m or abs(wrap_angle(dyaw)) >= p.insert_min_rad)
 
     def _align(self, cloud: small_gicp.PointCloud, guess: np.ndarray,
                gate: tuple[float, float]) -> RegistrationOutcome:
@@ -194,7 +208,8 @@ class Localizer:
         self.outcomes: Counter[str] = Counter()  # "accepted" or the rejection reason
         self.P = np.zeros((3, 3))  # covariance of T_loc_base (x, y, yaw): the start is known
         self._T_odom_prev: np.ndarray | None = None
-        self._rejected: list[np.ndarray] = []  # T_loc_odom (x, y, yaw) each rejection implied
+        # each rejected registration's T_loc_base and its frame's T_odom_base (x, y, yaw)
+        self._rejected: list[tuple[np.ndarray, np.ndarray]] = []
 
     def guess(self, T_odom_base: np.ndarray) -> np.ndarray:
         return self.T_loc_odom @ T_odom_base
@@ -242,10 +257,10 @@ class Localizer:
         fusion = fuse(np.array(xyyaw_from_T(guess)), self.P, meas,
                       measurement_cov(H, meas[2], filt), filt)
         if not fusion.accepted:
-            implied = T_reg @ invert(guess) @ self.T_loc_odom  # T_reg · T_odom_base⁻¹
+            T_odom_base = invert(self.T_loc_odom) @ guess
             self._rejected = self._rejected[-filt.reacquire_frames:] + [
-                np.array(xyyaw_from_T(implied))]
-            if not agree(self._rejected, filt):
+                (meas, np.array(xyyaw_from_T(T_odom_base)))]
+            if not agree([r for r, _ in self._rejected], [o for _, o in self._rejected], filt):
                 return RegistrationOutcome(guess, False, "implausible jump", T_reg,
                                            fusion.mahalanobis2)
             self.outcomes["reacquired"] += 1
@@ -257,6 +272,7 @@ class Localizer:
         self._rejected = []
         self.P = fusion.P
         T = T_from_xyyaw(*fusion.xyyaw)
-        reg.insert(cloud, T)
+        if reg.moved_since_insert(T):
+            reg.insert(cloud, T)
         reg.n_accepted += 1
         return RegistrationOutcome(T, True, "", T_reg, fusion.mahalanobis2)
