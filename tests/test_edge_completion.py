@@ -61,6 +61,21 @@ def test_space_sets_a_reached_place_aside_for_good_the_paper_for_a_while() -> No
         assert book.allowed(fs, 10**6)[0] == later, planner
 
 
+def test_second_look_moves_the_goal_off_the_place_already_looked_from() -> None:
+    """With space_second_look_m the region stays a target, seen from another place only."""
+    spec = GridSpec(0.0, 0.0, 0.1, 40, 40)
+    reachable = np.ones(spec.shape, bool)
+    book = GoalBook(EdgeConfig(planner="space", space_second_look_m=0.8))
+    book.issued[0] = (1.0, 1.0, False)
+    book.on_status(GoalStatus(robot_id=0, tick=0, goal_id=0, status="reached"))
+    assert book.allowed(_one_frontier_at((1.0, 1.0)), 10)[0]  # not set aside ...
+    cells = book.goal_cells(reachable, spec)
+    xy = spec.centre_of(np.argwhere(~cells))
+    d = np.hypot(xy[:, 0] - 1.0, xy[:, 1] - 1.0)
+    assert d.max() <= 0.8 + 0.1 and 150 < (~cells).sum() < 260  # ... but not from there
+    assert not cells[tuple(spec.cell_of(np.array([[1.0, 1.0]]))[0])]
+
+
 def test_cropped_robot_fields_equal_full_dijkstra() -> None:
     rng = np.random.default_rng(3)
     trav = rng.random((60, 80)) > 0.25

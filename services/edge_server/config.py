@@ -64,6 +64,10 @@ class EdgeConfig(BaseModel):
         default=True, description="a reached goal's place is set aside for good (with 100 "
         "ticks, 20-38 of 57-77 reached goals of a house mission went back to a place already "
         "reached: docs/edge.md, \"Coordinated space and the endgame\")")
+    space_second_look_m: float = Field(
+        default=0.0, ge=0, description="> 0: a reached place is no goal again within this "
+        "radius, but the region it looked at may be looked at again from elsewhere (among "
+        "shelves one side is not enough); 0: space_reached_final alone")
     space_look_at_region: bool = Field(default=False, description="goals carry the region's "
                                        "centroid: the robot faces it before reporting reached")
     nav_v_mps: float = Field(default=0.5, gt=0, description="the agents' max_v_mps (the "

@@ -58,6 +58,7 @@ class GoalBook:
         self.issued: dict[int, tuple[float, float, bool]] = {}  # goal id → goal x, y, F_w?
         self.blacklist: list[tuple[float, float, int]] = []  # (x, y, expiry tick)
         self.strikes: list[tuple[float, float]] = []  # every bad/reached report's place
+        self.looked_from: list[tuple[float, float]] = []  # reached places (space_second_look_m)
         self.next_goal_id = 0
 
     # -- agent reports ---------------------------------------------------------------------
@@ -71,6 +72,9 @@ class GoalBook:
             ticks = self.config.weak_visited_ticks if weak else self.config.reached_blacklist_ticks
             if self.config.planner == "space" and self.config.space_reached_final:
                 ticks = FOREVER_TICKS  # what a visit did not clear, another from there won't
+                if self.config.space_second_look_m > 0:  # ... but one from elsewhere might
+                    self.looked_from.append((x, y))
+                    ticks = 0
         r2 = self.config.blacklist_radius_m**2
         n = 1 + sum((x - sx) ** 2 + (y - sy) ** 2 <= r2 for sx, sy in self.strikes)
         self.strikes.append((x, y))
@@ -83,6 +87,19 @@ class GoalBook:
             log.info("robot %d goal %d %s %s", status.robot_id, status.goal_id, status.status,
                      status.reason)
             del self.active[status.robot_id]
+
+    def goal_cells(self, reachable: np.ndarray, spec: GridSpec) -> np.ndarray:
+        """Cells a goal may be placed on: reachable and away from every place looked from."""
+        if not self.looked_from:
+            return reachable
+        rc = spec.cell_of(np.array(self.looked_from))
+        rc = rc[spec.contains(rc)]
+        if not len(rc):
+            return reachable
+        seen = np.zeros(reachable.shape, bool)
+        seen[rc[:, 0], rc[:, 1]] = True
+        r = self.config.space_second_look_m / spec.resolution_m
+        return reachable & (ndimage.distance_transform_edt(~seen) > r)
 
     def release(self, robot_id: int) -> None:
         """Free a robot's goal (its agent is gone)."""

@@ -212,7 +212,7 @@ class EdgePlanner:
         fields = RobotFields(traversable, starts, self.config.start_snap_m / spec.resolution_m)
         reachable = fields.reachable
         fs = self._frontiers(tick, snap, traversable, reachable, fields, robot_xy,
-                             goal_transform(reachable))
+                             goal_transform(self.book.goal_cells(reachable, spec)))
         poses = np.array([[self.poses[r].x, self.poses[r].y, self.poses[r].yaw] for r in robots])
         result = self.book.plan(tick, robots, fields, fs, spec, self.scorer, poses)
         complete = self.judge.update(tick, result.assignable, int(snap.known.sum()))

@@ -80,6 +80,11 @@ class AgentConfig(BaseModel):
     reg_reacquire_rad_per_rad: float = Field(
         default=0.03, ge=0, description="re-acquisition: how far (rad per rad turned) the "
         "drift rejected registrations imply may change between them (odometry turn error)")
+    reg_insert_min_m: float = Field(
+        default=0.0, ge=0, description="a registered frame joins the registration map only "
+        "this far from the last one that did (0 = every frame)")
+    reg_insert_min_rad: float = Field(
+        default=0.0, ge=0, description="... or turned this much from it, rad")
     reg_sigma_m: float = Field(
         default=0.005, gt=0, description="σ of one registration along its strong directions, m")
     reg_sigma_rad: float = Field(
