@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -162,3 +163,23 @@ def test_registrations_asking_for_a_turn_the_wheels_lost_agree_at_its_rate() -> 
     assert agree(regs, odom, rate)
     slid = [r + np.array([0.02 * k, 0.0, 0.0]) for k, r in enumerate(regs)]  # 2 cm a frame
     assert not agree(slid, odom, rate)  # the wheels did not move: a slide, not a lost turn
+
+
+def test_frames_join_the_map_only_once_the_robot_moved_enough() -> None:
+    rng = np.random.default_rng(5)
+    room = _room(rng)
+    params = RegistrationParams(map_voxel_m=0.05, min_points=30, filter=PARAMS,
+                                insert_min_m=0.1, insert_min_rad=0.2)
+    inserted, accepted = {}, {}
+    for step in (0.1, 0.0):  # thresholds on, then off (every frame joins the map)
+        loc = Localizer(replace(params, insert_min_m=step))
+        outcomes = []
+        for k in range(10):  # 2 cm a frame, still on the ground truth
+            T_world_base = T_from_xyyaw(-1.0 + 0.02 * k, 0.1, 0.0)
+            outcomes.append(loc.update(_seen(room, T_world_base), T_world_base))
+        inserted[step] = loc.registrar.n_inserted
+        accepted[step] = sum(o.accepted for o in outcomes)
+        assert all(np.allclose(o.T_loc_base[:2, 3], [-1.0 + 0.02 * k, 0.1], atol=0.01)
+                   for k, o in enumerate(outcomes))
+    assert inserted[0.0] == 10 and 2 <= inserted[0.1] <= 6
+    assert accepted[0.1] >= accepted[0.0] - 1  # fewer inserts, as many registrations
