@@ -28,7 +28,8 @@ app = typer.Typer(add_completion=False, no_args_is_help=False, help=__doc__)
 @app.command()
 def router(
     listen: Annotated[
-        list[str] | None, typer.Option("--listen", help="endpoint(s) to listen on")
+        list[str] | None, typer.Option("--listen", help="endpoint(s) to listen on (default "
+                                       "tls/0.0.0.0:7447 with bus.credentials, else tcp/)")
     ] = None,
     lease: Annotated[
         float, typer.Option("--lease", help="seconds before a silent peer is gone")
@@ -37,30 +38,41 @@ def router(
     set_: SetOpt = None,
     log_level: LogOpt = "INFO",
 ) -> None:
-    """Run the zenoh router (mode router); with bus.credentials, authenticated and with
-    access control (bus.prefix names the keys)."""
-    from services.common.router import run_router
+    """Run the zenoh router (mode router); with bus.credentials, authenticated, with access
+    control (bus.prefix names the keys) and mutual TLS (unless bus.tls=false)."""
+    from services.common.router import default_listen, run_router
     from services.common.signals import stop_on_signals
+    from services.common.tls import TlsError
 
     setup_logging(log_level)
     bus = service_config(config, None, set_).bus
-    run_router(listen or ["tcp/0.0.0.0:7447"], stop_on_signals(), lease,
-               credentials=bus.credentials, prefix=bus.prefix)
+    try:
+        run_router(listen or default_listen(bus.credentials, bus.tls), stop_on_signals(), lease,
+                   credentials=bus.credentials, prefix=bus.prefix, tls=bus.tls)
+    except TlsError as exc:
+        raise typer.BadParameter(str(exc)) from exc
 
 
 @app.command()
 def credentials(
     out: Annotated[Path, typer.Option("--out", help="folder to write (mode 0700)")],
     robots: Annotated[int, typer.Option("--robots", min=1, help="agents in the fleet")] = 3,
+    router_host: Annotated[list[str] | None, typer.Option(
+        "--router-host", help="host name or address clients use to reach the router, for "
+        "its certificate (repeatable; localhost, 127.0.0.1, ::1 and router always)")] = None,
+    days: Annotated[int, typer.Option("--days", min=1, help="certificate validity")] = 365,
 ) -> None:
-    """Create a login per process (sim, edge, monitor, agent-0..N-1) and the router's
-    dictionary; point every service's bus.credentials at the folder."""
+    """Create a login per process (sim, edge, monitor, agent-0..N-1), the router's
+    dictionary, a CA with the router's TLS certificate and a client certificate per
+    process; point every service's bus.credentials at the folder."""
     from services.common.access import make_credentials
     from services.common.fleet import reset_claims
+    from services.common.tls import router_names
 
-    users = make_credentials(out, robots)
+    users = make_credentials(out, robots, router_host or (), days)
     reset_claims(out)  # a fresh fleet: agent replicas claim their ids anew
-    typer.echo(f"credentials for {', '.join(users)} in {out}")
+    typer.echo(f"credentials for {', '.join(users)} in {out}; router certificate for "
+               f"{', '.join(router_names(out))}")
 
 
 @app.command()
@@ -299,6 +311,7 @@ def health(
     from services.common.access import identity
     from services.common.fleet import resolve_robot
     from services.common.health import is_alive
+    from services.common.tls import TlsError
 
     cfg = service_config(config, connect, set_)
     if ident == "auto":  # this agent replica's claimed id
@@ -309,7 +322,12 @@ def health(
         ident = str(robot)
     if login_as == "auto":
         login_as = identity(role, ident)
-    if not is_alive(cfg.bus, role, ident, timeout, login_as):
+    try:
+        alive = is_alive(cfg.bus, role, ident, timeout, login_as)
+    except TlsError as exc:
+        typer.echo(f"{role}/{ident}: {exc}", err=True)
+        raise typer.Exit(2) from exc
+    if not alive:
         typer.echo(f"{role}/{ident}: not alive on {cfg.bus.connect}", err=True)
         raise typer.Exit(1)
     typer.echo(f"{role}/{ident}: alive")
