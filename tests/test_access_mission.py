@@ -1,8 +1,8 @@
-"""A lockstep mission with logins, access control and mutual TLS (router, simulator, edge, two
-agents as OS processes) while a client holding agent 0's login misbehaves: it tries to drive robot 1 and
-to speak for the edge and the simulator (the router refuses), and it floods every key agent 0
-may publish with bad payloads (every process drops, logs and counts each one). A client with
-no login gets no session. The mission runs on and no process dies."""
+"""A lockstep mission with logins, access control and mutual TLS (router, simulator, edge,
+two agents as OS processes) while a client holding agent 0's login misbehaves: it tries to
+drive robot 1 and to speak for the edge and the simulator (the router refuses), and it floods
+every key agent 0 may publish with bad payloads (every process drops, logs and counts each
+one). A client with no login gets no session. The mission runs on and no process dies."""
 
 from __future__ import annotations
 
