@@ -8,6 +8,7 @@ import shutil
 import socket
 import ssl
 import stat
+import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -19,7 +20,7 @@ from cryptography import x509
 from schemas.keys import Keys
 from services.common.access import acl_config, identities, make_credentials
 from services.common.bus import BusConfig, login_for, open_session, tls_for, zenoh_config
-from services.common.router import _check_links, default_listen
+from services.common.router import _check_links, default_listen, run_router
 from services.common.tls import (
     CA,
     TlsError,
@@ -28,6 +29,7 @@ from services.common.tls import (
     router_names,
     router_tls,
 )
+from services.processes import free_tcp_port
 from tests.test_access_router import secure_router
 
 KEYS = Keys("spacemap")
@@ -214,3 +216,28 @@ def test_a_login_with_another_users_certificate_speaks_for_no_one(router: BusCon
                            tls=client_tls(router.credentials, "agent-1"))
     with zenoh.open(swapped) as rogue:
         assert not delivered(router, rogue, 0, b"swapped certificate")
+
+
+@pytest.mark.multiprocess
+def test_the_router_name_is_checked(folder: Path) -> None:
+    """A router listening on two loopback addresses, its certificate made for 127.0.0.1
+    only: a client that dials 127.0.0.2 refuses the router (the name is verified), the same
+    client dialling 127.0.0.1 connects."""
+    port_ = free_tcp_port()
+    stop = threading.Event()
+    serve = threading.Thread(target=run_router, args=(
+        [f"tls/127.0.0.1:{port_}", f"tls/127.0.0.2:{port_}"], stop),
+        kwargs={"credentials": str(folder)}, daemon=True)
+    serve.start()
+    try:
+        ok = BusConfig(connect=f"tls/127.0.0.1:{port_}", credentials=str(folder),
+                       connect_timeout_s=10)
+        with open_session(ok, "sim"):
+            pass
+        other = ok.model_copy(update={"connect": f"tls/127.0.0.2:{port_}",
+                                      "connect_timeout_s": 2.0})
+        with pytest.raises(zenoh.ZError), open_session(other, "sim"):
+            pass
+    finally:
+        stop.set()
+        serve.join(timeout=10)
