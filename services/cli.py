@@ -19,6 +19,7 @@ from services.cli_common import (
     parse_sets,
     service_config,
     setup_logging,
+    tls_errors,
 )
 from services.cli_results import bench, eval_
 from services.config import load_config
@@ -87,7 +88,8 @@ def sim(
     from services.simulator.node import main
 
     setup_logging(log_level)
-    main(service_config(config, connect, set_))
+    with tls_errors():
+        main(service_config(config, connect, set_))
 
 
 @app.command()
@@ -101,7 +103,8 @@ def edge(
     from services.edge_server.node import main
 
     setup_logging(log_level)
-    main(service_config(config, connect, set_))
+    with tls_errors():
+        main(service_config(config, connect, set_))
 
 
 @app.command()
@@ -124,7 +127,8 @@ def agent(
     except (ValueError, RuntimeError) as exc:
         raise typer.BadParameter(str(exc)) from exc
     logging.getLogger("spacemap.agent").info("robot id %s (--robot %s)", robot_id, robot)
-    main(cfg, robot_id)
+    with tls_errors():
+        main(cfg, robot_id)
 
 
 @app.command()
@@ -225,8 +229,10 @@ def run(
         _check_view(view_to)
     out_dir = out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     try:
-        result = run_mission(cfg, out_dir, router_endpoint=connect, sample_every_s=sample_every,
-                             log_level=log_level, view=view_to if view else None)
+        with tls_errors():
+            result = run_mission(cfg, out_dir, router_endpoint=connect,
+                                 sample_every_s=sample_every, log_level=log_level,
+                                 view=view_to if view else None)
     except MissionError as exc:
         typer.echo(f"mission failed: {exc}", err=True)
         raise typer.Exit(1) from exc
@@ -263,8 +269,9 @@ def record(
 
     setup_logging(log_level)
     try:
-        result = record_mission(service_config(config, connect, set_), out,
-                                sample_every_s=sample_every)
+        with tls_errors():
+            result = record_mission(service_config(config, connect, set_), out,
+                                    sample_every_s=sample_every)
     except MissionError as exc:
         typer.echo(f"recording failed: {exc}", err=True)
         raise typer.Exit(1) from exc
@@ -289,7 +296,8 @@ def view(
     setup_logging(log_level)
     _check_view(to)
     try:
-        watch_mission(service_config(config, connect, set_), to, save, sample_every)
+        with tls_errors():
+            watch_mission(service_config(config, connect, set_), to, save, sample_every)
     except MissionError as exc:
         typer.echo(f"view stopped: {exc}", err=True)
         raise typer.Exit(1) from exc
@@ -347,7 +355,8 @@ def inventory(
     from services.common.inventory import collect_inventories
 
     cfg = service_config(config, connect, set_)
-    typer.echo(json.dumps(collect_inventories(cfg.bus, robots, timeout), indent=1))
+    with tls_errors():
+        typer.echo(json.dumps(collect_inventories(cfg.bus, robots, timeout), indent=1))
 
 
 # results commands live in their own module (services/cli_results.py)

@@ -241,3 +241,20 @@ def test_the_router_name_is_checked(folder: Path) -> None:
     finally:
         stop.set()
         serve.join(timeout=10)
+
+
+@pytest.mark.parametrize("command", [["health", "--role", "sim", "--as", "agent-0"],
+                                     ["inventory", "--robots", "1"]])
+def test_cli_names_the_bad_file(folder: Path, tmp_path: Path, command: list[str]) -> None:
+    """A command with a user's key missing: one line naming the file, status 2."""
+    from typer.testing import CliRunner
+
+    from services.cli import app
+
+    bad = broken(folder, tmp_path / "bad", "missing key")
+    shutil.copy(bad / "agent-0.pem", bad / "monitor.pem")  # monitor: a foreign key
+    result = CliRunner().invoke(app, [*command, "--connect", "tls/127.0.0.1:9",
+                                      "--set", f"bus.credentials={bad}"])
+    assert result.exit_code == 2, result.output
+    assert ("agent-0.key is missing" in result.output if "health" in command
+            else "monitor.key does not belong" in result.output), result.output
