@@ -19,6 +19,7 @@ from services.cli_common import (
     parse_sets,
     service_config,
     setup_logging,
+    tls_errors,
 )
 from services.cli_results import bench, eval_
 from services.config import load_config
@@ -28,7 +29,8 @@ app = typer.Typer(add_completion=False, no_args_is_help=False, help=__doc__)
 @app.command()
 def router(
     listen: Annotated[
-        list[str] | None, typer.Option("--listen", help="endpoint(s) to listen on")
+        list[str] | None, typer.Option("--listen", help="endpoint(s) to listen on (default "
+                                       "tls/0.0.0.0:7447 with bus.credentials, else tcp/)")
     ] = None,
     lease: Annotated[
         float, typer.Option("--lease", help="seconds before a silent peer is gone")
@@ -37,30 +39,41 @@ def router(
     set_: SetOpt = None,
     log_level: LogOpt = "INFO",
 ) -> None:
-    """Run the zenoh router (mode router); with bus.credentials, authenticated and with
-    access control (bus.prefix names the keys)."""
-    from services.common.router import run_router
+    """Run the zenoh router (mode router); with bus.credentials, authenticated, with access
+    control (bus.prefix names the keys) and mutual TLS (unless bus.tls=false)."""
+    from services.common.router import default_listen, run_router
     from services.common.signals import stop_on_signals
+    from services.common.tls import TlsError
 
     setup_logging(log_level)
     bus = service_config(config, None, set_).bus
-    run_router(listen or ["tcp/0.0.0.0:7447"], stop_on_signals(), lease,
-               credentials=bus.credentials, prefix=bus.prefix)
+    try:
+        run_router(listen or default_listen(bus.credentials, bus.tls), stop_on_signals(), lease,
+                   credentials=bus.credentials, prefix=bus.prefix, tls=bus.tls)
+    except TlsError as exc:
+        raise typer.BadParameter(str(exc)) from exc
 
 
 @app.command()
 def credentials(
     out: Annotated[Path, typer.Option("--out", help="folder to write (mode 0700)")],
     robots: Annotated[int, typer.Option("--robots", min=1, help="agents in the fleet")] = 3,
+    router_host: Annotated[list[str] | None, typer.Option(
+        "--router-host", help="host name or address clients use to reach the router, for "
+        "its certificate (repeatable; localhost, 127.0.0.1, ::1 and router always)")] = None,
+    days: Annotated[int, typer.Option("--days", min=1, help="certificate validity")] = 365,
 ) -> None:
-    """Create a login per process (sim, edge, monitor, agent-0..N-1) and the router's
-    dictionary; point every service's bus.credentials at the folder."""
+    """Create a login per process (sim, edge, monitor, agent-0..N-1), the router's
+    dictionary, a CA with the router's TLS certificate and a client certificate per
+    process; point every service's bus.credentials at the folder."""
     from services.common.access import make_credentials
     from services.common.fleet import reset_claims
+    from services.common.tls import router_names
 
-    users = make_credentials(out, robots)
+    users = make_credentials(out, robots, router_host or (), days)
     reset_claims(out)  # a fresh fleet: agent replicas claim their ids anew
-    typer.echo(f"credentials for {', '.join(users)} in {out}")
+    typer.echo(f"credentials for {', '.join(users)} in {out}; router certificate for "
+               f"{', '.join(router_names(out))}")
 
 
 @app.command()
@@ -75,7 +88,8 @@ def sim(
     from services.simulator.node import main
 
     setup_logging(log_level)
-    main(service_config(config, connect, set_))
+    with tls_errors():
+        main(service_config(config, connect, set_))
 
 
 @app.command()
@@ -89,7 +103,8 @@ def edge(
     from services.edge_server.node import main
 
     setup_logging(log_level)
-    main(service_config(config, connect, set_))
+    with tls_errors():
+        main(service_config(config, connect, set_))
 
 
 @app.command()
@@ -112,7 +127,8 @@ def agent(
     except (ValueError, RuntimeError) as exc:
         raise typer.BadParameter(str(exc)) from exc
     logging.getLogger("spacemap.agent").info("robot id %s (--robot %s)", robot_id, robot)
-    main(cfg, robot_id)
+    with tls_errors():
+        main(cfg, robot_id)
 
 
 @app.command()
@@ -213,8 +229,10 @@ def run(
         _check_view(view_to)
     out_dir = out or Path("runs") / time.strftime("%Y%m%d-%H%M%S")
     try:
-        result = run_mission(cfg, out_dir, router_endpoint=connect, sample_every_s=sample_every,
-                             log_level=log_level, view=view_to if view else None)
+        with tls_errors():
+            result = run_mission(cfg, out_dir, router_endpoint=connect,
+                                 sample_every_s=sample_every, log_level=log_level,
+                                 view=view_to if view else None)
     except MissionError as exc:
         typer.echo(f"mission failed: {exc}", err=True)
         raise typer.Exit(1) from exc
@@ -251,8 +269,9 @@ def record(
 
     setup_logging(log_level)
     try:
-        result = record_mission(service_config(config, connect, set_), out,
-                                sample_every_s=sample_every)
+        with tls_errors():
+            result = record_mission(service_config(config, connect, set_), out,
+                                    sample_every_s=sample_every)
     except MissionError as exc:
         typer.echo(f"recording failed: {exc}", err=True)
         raise typer.Exit(1) from exc
@@ -277,7 +296,8 @@ def view(
     setup_logging(log_level)
     _check_view(to)
     try:
-        watch_mission(service_config(config, connect, set_), to, save, sample_every)
+        with tls_errors():
+            watch_mission(service_config(config, connect, set_), to, save, sample_every)
     except MissionError as exc:
         typer.echo(f"view stopped: {exc}", err=True)
         raise typer.Exit(1) from exc
@@ -299,6 +319,7 @@ def health(
     from services.common.access import identity
     from services.common.fleet import resolve_robot
     from services.common.health import is_alive
+    from services.common.tls import TlsError
 
     cfg = service_config(config, connect, set_)
     if ident == "auto":  # this agent replica's claimed id
@@ -309,7 +330,12 @@ def health(
         ident = str(robot)
     if login_as == "auto":
         login_as = identity(role, ident)
-    if not is_alive(cfg.bus, role, ident, timeout, login_as):
+    try:
+        alive = is_alive(cfg.bus, role, ident, timeout, login_as)
+    except TlsError as exc:
+        typer.echo(f"{role}/{ident}: {exc}", err=True)
+        raise typer.Exit(2) from exc
+    if not alive:
         typer.echo(f"{role}/{ident}: not alive on {cfg.bus.connect}", err=True)
         raise typer.Exit(1)
     typer.echo(f"{role}/{ident}: alive")
@@ -329,7 +355,8 @@ def inventory(
     from services.common.inventory import collect_inventories
 
     cfg = service_config(config, connect, set_)
-    typer.echo(json.dumps(collect_inventories(cfg.bus, robots, timeout), indent=1))
+    with tls_errors():
+        typer.echo(json.dumps(collect_inventories(cfg.bus, robots, timeout), indent=1))
 
 
 # results commands live in their own module (services/cli_results.py)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -39,6 +41,19 @@ def parse_sets(sets: list[str] | None) -> dict[str, Any]:
         key, raw = item.split("=", 1)
         out[key.strip()] = yaml.safe_load(raw)
     return out
+
+
+@contextmanager
+def tls_errors() -> Iterator[None]:
+    """A missing or unusable certificate, or an endpoint that contradicts bus.tls: one line
+    naming the file or the setting, exit status 2, no traceback."""
+    from services.common.tls import TlsError
+
+    try:
+        yield
+    except TlsError as exc:
+        typer.echo(f"spacemap: {exc}", err=True)
+        raise typer.Exit(2) from exc
 
 
 def service_config(

@@ -1,22 +1,26 @@
 """Observer for the multi-host test: runs inside a test host and prints the mission's state as
-JSON lines (sim time, live processes, completion) to stdout, until stdin closes."""
+JSON lines (sim time, live processes, completion) to stdout, until stdin closes. Its one
+argument is the mission's config file; it logs in as the monitor."""
 
 from __future__ import annotations
 
 import json
 import sys
 import threading
+from pathlib import Path
 
 from schemas.messages import Clock, Frontiers
-from services.common.bus import BusConfig, Inbound, Presence, connect
+from services.common.access import identity
+from services.common.bus import Inbound, Presence, connect
+from services.config import load_config
 
 
-def main(endpoint: str) -> None:
+def main(config_path: str) -> None:
     stop = threading.Event()
     threading.Thread(target=lambda: (sys.stdin.read(), stop.set()), daemon=True).start()
     state: dict[str, object] = {"t": 0.0, "alive": [], "complete": False}
     alive: set[str] = set()
-    with connect(BusConfig(connect=endpoint, lease_s=2.0)) as bus:
+    with connect(load_config(Path(config_path)).bus, identity("monitor")) as bus:
         bus.subscribe(bus.keys.clock(), Clock)
         bus.subscribe(bus.keys.map_frontiers(), Frontiers)
         bus.watch_liveliness()

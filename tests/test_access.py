@@ -123,6 +123,8 @@ def test_credentials(tmp_path: Path) -> None:
         cred = load_credential(tmp_path / "c", user)
         assert f"{user}:{cred.password}" in lines
         assert stat.S_IMODE((tmp_path / "c" / f"{user}.json").stat().st_mode) == 0o600
+    assert (tmp_path / "c" / "ca.pem").exists() and (tmp_path / "c" / "router.key").exists()
+    assert all((tmp_path / "c" / f"{user}.pem").exists() for user in users)
     again = make_credentials(tmp_path / "d", robots=2)
     assert load_credential(tmp_path / "d", again[0]).password != load_credential(
         tmp_path / "c", again[0]).password

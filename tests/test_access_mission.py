@@ -1,8 +1,8 @@
-"""A lockstep mission with logins and access control (router, simulator, edge, two agents as
-OS processes) while a client holding agent 0's login misbehaves: it tries to drive robot 1 and
-to speak for the edge and the simulator (the router refuses), and it floods every key agent 0
-may publish with bad payloads (every process drops, logs and counts each one). A client with
-no login gets no session. The mission runs on and no process dies."""
+"""A lockstep mission with logins, access control and mutual TLS (router, simulator, edge,
+two agents as OS processes) while a client holding agent 0's login misbehaves: it tries to
+drive robot 1 and to speak for the edge and the simulator (the router refuses), and it floods
+every key agent 0 may publish with bad payloads (every process drops, logs and counts each
+one). A client with no login gets no session. The mission runs on and no process dies."""
 
 from __future__ import annotations
 
@@ -47,7 +47,7 @@ def reasons(topic: str) -> set[str]:
 
 
 def test_logins_rules_and_fuzz_during_a_mission(tmp_path: Path) -> None:
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    endpoint = f"tls/127.0.0.1:{free_tcp_port()}"  # mutual TLS, as `spacemap run` does
     cred = tmp_path / "cred"
     make_credentials(cred, robots=2)
     config = load_config(overrides={
@@ -66,8 +66,9 @@ def test_logins_rules_and_fuzz_during_a_mission(tmp_path: Path) -> None:
             monitor = Monitor(bus, robots=2)
             start_services(group, tmp_path / "config.yaml", robots=2)
             wait_for(lambda: monitor.clock is not None, monitor, group, 120, "the first tick")
-            anonymous = config.bus.model_copy(update={"credentials": None,
-                                                      "connect_timeout_s": 2.0})
+            anonymous = config.bus.model_copy(update={
+                "credentials": None, "connect_timeout_s": 2.0, "tls": False,
+                "connect": endpoint.replace("tls/", "tcp/")})
             with pytest.raises(zenoh.ZError), open_session(anonymous):
                 pass
             with open_session(config.bus, identity("agent", 0)) as rogue:

@@ -1,13 +1,16 @@
 """The generated access control enforced by a real router (`spacemap router`, its own OS
-process, on loopback): every forbidden publish, subscription, queryable and liveliness token
-of every user is refused, every granted one goes through; no login, no session."""
+process, on loopback, mutual TLS as by default): every forbidden publish, subscription,
+queryable and liveliness token of every user is refused, every granted one goes through; no
+login, no session."""
 
 from __future__ import annotations
 
+import json
+import shutil
 import threading
 import time
 from collections.abc import Callable, Iterator
-from contextlib import ExitStack
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 import pytest
@@ -15,7 +18,8 @@ import zenoh
 
 from schemas.keys import Keys, role_keys
 from services.common.access import identities, make_credentials
-from services.common.bus import BusConfig, open_session
+from services.common.bus import BusConfig, login_for, open_session, zenoh_config
+from services.common.tls import client_tls
 from services.processes import ProcessGroup, free_tcp_port, spacemap_command
 from tests.test_access import every_key, matches
 
@@ -34,21 +38,31 @@ def wait_until(condition: Callable[[], bool], timeout_s: float, what: str) -> No
         time.sleep(0.02)
 
 
-@pytest.fixture(scope="module")
-def router(tmp_path_factory: pytest.TempPathFactory) -> Iterator[BusConfig]:
-    tmp = tmp_path_factory.mktemp("acl")
+@contextmanager
+def secure_router(tmp: Path, tls: bool = True) -> Iterator[BusConfig]:
+    """`spacemap router` with fresh credentials in `tmp`, on loopback (tls/ unless `tls` is
+    False); yields the config a client of it uses, once the router accepts sessions."""
     make_credentials(tmp / "cred", ROBOTS)
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    endpoint = f"{'tls' if tls else 'tcp'}/127.0.0.1:{free_tcp_port()}"
     group = ProcessGroup(tmp / "logs")
     group.start("router", spacemap_command(
-        "router", "--listen", endpoint, "--set", f"bus.credentials={tmp / 'cred'}"))
-    config = BusConfig(connect=endpoint, credentials=str(tmp / "cred"), connect_timeout_s=20)
+        "router", "--listen", endpoint, "--set", f"bus.credentials={tmp / 'cred'}",
+        "--set", f"bus.tls={str(tls).lower()}"))
+    config = BusConfig(connect=endpoint, credentials=str(tmp / "cred"), connect_timeout_s=20,
+                       tls=tls)
     try:
         with open_session(config, "monitor"):  # the router is up
             pass
         yield config
     finally:
-        group.stop()
+        codes = group.stop()
+    assert codes == {"router": 0}, (tmp / "logs" / "router.log").read_text()[-2000:]
+
+
+@pytest.fixture(scope="module")
+def router(tmp_path_factory: pytest.TempPathFactory) -> Iterator[BusConfig]:
+    with secure_router(tmp_path_factory.mktemp("acl")) as config:
+        yield config
 
 
 def grants(user: str):  # noqa: ANN201 - RoleKeys
@@ -131,18 +145,32 @@ def test_matrix_on_a_real_router(router: BusConfig) -> None:
         del tokens
 
 
+def login_folder(router: BusConfig, into: Path, login: str) -> tuple[str, str | None]:
+    """A copy of the router's credentials folder that holds a bad login for `login`:
+    (user to log in as, folder or None); certificates stay valid, so only the login fails."""
+    if login == "none":
+        return "agent-0", None
+    shutil.copytree(str(router.credentials), into)
+    if login == "wrong password":
+        cred = json.loads((into / "agent-0.json").read_text())
+        (into / "agent-0.json").write_text(json.dumps({**cred, "password": "x" * 32}))
+        return "agent-0", str(into)
+    for ext in ("pem", "key"):  # a stranger holding agent-0's certificate
+        shutil.copy(into / f"agent-0.{ext}", into / f"stranger.{ext}")
+    (into / "stranger.json").write_text(
+        (into / "sim.json").read_text().replace('"sim"', '"stranger"'))
+    return "stranger", str(into)
+
+
 @pytest.mark.parametrize("login", ["none", "wrong password", "unknown user"])
 def test_no_login_no_session(router: BusConfig, login: str, tmp_path: Path) -> None:
-    probe = router.model_copy(update={"connect_timeout_s": 2.0})
-    if login == "none":
-        probe = probe.model_copy(update={"credentials": None})
-    else:
-        other = tmp_path / "other"
-        make_credentials(other, ROBOTS)  # same user names, other passwords
-        if login == "unknown user":
-            (other / "stranger.json").write_text(
-                (other / "sim.json").read_text().replace('"sim"', '"stranger"'))
-        probe = probe.model_copy(update={"credentials": str(other)})
-    user = "stranger" if login == "unknown user" else "agent-0"
-    with pytest.raises(zenoh.ZError), open_session(probe, user) as session:
+    """A client that passes TLS (the mission's CA, a certificate it signed) but has no valid
+    login gets no session: the password check is not replaced by the certificate."""
+    user, folder = login_folder(router, tmp_path / "other", login)
+    assert router.credentials is not None
+    tls = client_tls(router.credentials, "agent-0")
+    conf = zenoh_config("client", connect=[router.connect], connect_timeout_s=2.0, tls=tls,
+                        login=None if folder is None else login_for(
+                            router.model_copy(update={"credentials": folder}), user))
+    with pytest.raises(zenoh.ZError), zenoh.open(conf) as session:
         session.put(KEYS.cmd_vel(0), b"x")

@@ -80,7 +80,7 @@ def test_environment_maps_to_config(name: str) -> None:
         path = var[len(ENV_PREFIX):].lower().split("__")
         assert _field_exists(SpacemapConfig, path), f"{var} maps to no config field"
     config = load_config(environ=env)
-    assert config.bus.connect == "tcp/router:7447"
+    assert config.bus.connect == "tls/router:7447" and config.bus.tls
     assert config.sim.robots == 3
 
 

@@ -1,6 +1,8 @@
 """Across hosts (issue 7): router and edge, simulator, two agents and an observer on separate
-test hosts (network namespaces on one bridge). A mission runs; one agent's link is cut and
-restored; another agent is SIGKILLed and restarted; nothing any agent mapped is lost."""
+test hosts (network namespaces on one bridge), every link mutual TLS with logins and access
+control (issue 14), the router's certificate made for its address on the bridge. A mission
+runs; one agent's link is cut and restored; another agent is SIGKILLed and restarted; nothing
+any agent mapped is lost."""
 
 from __future__ import annotations
 
@@ -16,6 +18,7 @@ from typing import Any
 
 import pytest
 
+from services.common.access import make_credentials
 from services.common.inventory import missing_submaps
 from services.config import load_config, write_config
 from services.processes import ProcessGroup, spacemap_command
@@ -59,10 +62,10 @@ def wait_for(cond: Callable[[], bool], timeout_s: float, what: str, group: Proce
     raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
 
 
-def inventories(hosts: Hosts, endpoint: str) -> dict[str, Any]:
+def inventories(hosts: Hosts, endpoint: str, cfg: list[str]) -> dict[str, Any]:
     out = subprocess.run(
         hosts.exec_prefix("obs") + spacemap_command(
-            "inventory", "--robots", "2", "--connect", endpoint, "--timeout", "5"),
+            "inventory", "--robots", "2", "--connect", endpoint, "--timeout", "5", *cfg),
         cwd=REPO, capture_output=True, text=True, timeout=60, check=True,
     )
     return json.loads(out.stdout)
@@ -88,10 +91,11 @@ def hosts() -> Any:
 def test_mission_across_hosts_survives_a_cut_link_and_a_killed_agent(
     hosts: Hosts, tmp_path: Path
 ) -> None:
-    endpoint = f"tcp/{hosts.address['core']}:7447"
+    endpoint = f"tls/{hosts.address['core']}:7447"
+    make_credentials(tmp_path / "cred", 2, router_hosts=[hosts.address["core"]])
     config = load_config(overrides={
-        "bus.connect": endpoint, "bus.lease_s": 2.0, "sim.robots": 2, "sim.seed": 5,
-        "sim.max_sim_time_s": 80.0,
+        "bus.connect": endpoint, "bus.lease_s": 2.0, "bus.credentials": str(tmp_path / "cred"),
+        "sim.robots": 2, "sim.seed": 5, "sim.max_sim_time_s": 80.0,
     })
     cfg_path = tmp_path / "config.yaml"
     write_config(config, cfg_path)
@@ -102,7 +106,7 @@ def test_mission_across_hosts_survives_a_cut_link_and_a_killed_agent(
         group.start(name, hosts.exec_prefix(host) + spacemap_command(*argv))
 
     try:
-        start("router", "core", "router", "--listen", endpoint, "--lease", "2")
+        start("router", "core", "router", "--listen", endpoint, "--lease", "2", *cfg)
         start("edge", "core", "edge", *cfg)
         start("agent0", "a0", "agent", "--robot", "0", *cfg)
         start("agent1", "a1", "agent", "--robot", "1", *cfg)
@@ -111,7 +115,7 @@ def test_mission_across_hosts_survives_a_cut_link_and_a_killed_agent(
         start("sim", "simh", "sim", *cfg)
         observer = Observer(subprocess.Popen(
             hosts.exec_prefix("obs") + [sys.executable, str(REPO / "tests/multihost_observer.py"),
-                                        endpoint],
+                                        str(cfg_path)],
             cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
         ))
         wait_for(lambda: observer.t >= 5.0, 180, "5 s of sim time", group)
@@ -125,11 +129,11 @@ def test_mission_across_hosts_survives_a_cut_link_and_a_killed_agent(
         wait_for(lambda: observer.alive("agent/0"), 60, "agent 0 back", group)
         t_back = observer.t
         wait_for(lambda: observer.t >= t_back + 3.0, 60, "3 s with agent 0 back", group)
-        wait_for(lambda: not lost(inventories(hosts, endpoint), 0), 60,
+        wait_for(lambda: not lost(inventories(hosts, endpoint, cfg), 0), 60,
                  "every submap of agent 0 at the edge", group)
 
         # SIGKILL agent 1 and restart it (a new epoch): its old submaps must stay.
-        before_kill = inventories(hosts, endpoint)["agents"]["1"]
+        before_kill = inventories(hosts, endpoint, cfg)["agents"]["1"]
         group.children["agent1"].kill()
         wait_for(lambda: not observer.alive("agent/1"), 2.0, "agent 1 gone within 2 s", group)
         start("agent1b", "a1", "agent", "--robot", "1", *cfg)
@@ -140,7 +144,7 @@ def test_mission_across_hosts_survives_a_cut_link_and_a_killed_agent(
         wait_for(lambda: group.children["recorder"].poll() is not None, 300,
                  "the mission's end (recorder exits)", group)
         assert group.children["recorder"].returncode == 0, (tmp_path / "logs/recorder.log")
-        final = inventories(hosts, endpoint)
+        final = inventories(hosts, endpoint, cfg)
         assert lost(final, 0) == {}, "agent 0 lost submaps"
         assert lost(final, 1) == {}, "restarted agent 1 lost submaps"
         assert lost(final, 1, before_kill) == {}, "agent 1's first life lost submaps"

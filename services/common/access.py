@@ -1,9 +1,11 @@
 """Who may speak on which key: identities, the router's zenoh access control, credentials.
 
 Each process authenticates to the router with zenoh's user/password authentication (one user
-per process: `sim`, `edge`, `monitor`, `agent-{id}`); the router's access control binds each
-user to the keys `schemas.keys.role_keys` gives its role, and denies everything else.
-`acl_config` is pure; the file helpers below it write and read a credentials folder.
+per process: `sim`, `edge`, `monitor`, `agent-{id}`) and, on TLS links, with a client
+certificate whose common name is the same user (services/common/tls.py); the router's access
+control binds each user to the keys `schemas.keys.role_keys` gives its role, and denies
+everything else. `acl_config` is pure; the file helpers below it write and read a credentials
+folder.
 """
 
 from __future__ import annotations
@@ -11,12 +13,14 @@ from __future__ import annotations
 import json
 import os
 import secrets
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from schemas.keys import Keys, RoleKeys, role_keys
+from services.common.tls import DEFAULT_DAYS, make_certificates
 
 SINGLE_ROLES = ("sim", "edge", "monitor")
 DICTIONARY = "users.txt"  # the router's user:password dictionary
@@ -75,16 +79,21 @@ def _shared_rules(keys: Keys) -> list[dict[str, Any]]:
     ]
 
 
-def acl_config(prefix: str, robots: int) -> dict[str, Any]:
+def acl_config(prefix: str, robots: int, mtls: bool = False) -> dict[str, Any]:
     """The router's `access_control` section for a mission: one subject per user, each
-    bound to its role's keys; default deny."""
+    bound to its role's keys; default deny. With `mtls` a subject is the user's login AND a
+    client certificate with the user as common name (zenoh matches every attribute of a
+    subject), so a login presented with another user's certificate matches no one."""
     keys = Keys(prefix)
     shared = _shared_rules(keys)
     rules, subjects, policies = list(shared), [], []
     for user, (role, ident) in identities(robots).items():
         own = _user_rules(user, role_keys(keys, role, ident, robots))
         rules += own
-        subjects.append({"id": user, "usernames": [user]})
+        subject: dict[str, Any] = {"id": user, "usernames": [user]}
+        if mtls:
+            subject["cert_common_names"] = [user]
+        subjects.append(subject)
         policies.append({"id": user, "subjects": [user],
                          "rules": [r["id"] for r in own] + [r["id"] for r in shared]})
     return {"enabled": True, "default_permission": "deny", "rules": rules,
@@ -106,9 +115,12 @@ def _write_private(path: Path, text: str) -> None:
         fh.write(text)
 
 
-def make_credentials(out: Path, robots: int) -> list[str]:
+def make_credentials(out: Path, robots: int, router_hosts: Iterable[str] = (),
+                     days: int = DEFAULT_DAYS) -> list[str]:
     """Write a fresh password per user of a `robots`-robot mission into `out`: the router's
-    dictionary, one `{user}.json` per process, and the fleet size. Returns the users."""
+    dictionary, one `{user}.json` per process, and the fleet size; and a fresh CA with the
+    router's certificate (valid for loopback, `router` and `router_hosts`) and one client
+    certificate per user (services/common/tls.py). Returns the users."""
     if robots < 1:
         raise ValueError("robots must be ≥ 1")
     out.mkdir(parents=True, exist_ok=True)
@@ -118,6 +130,7 @@ def make_credentials(out: Path, robots: int) -> list[str]:
         _write_private(out / f"{cred.user}.json", cred.model_dump_json())
     _write_private(out / DICTIONARY, "".join(f"{c.user}:{c.password}\n" for c in creds))
     _write_private(out / MISSION, json.dumps({"robots": robots}))
+    make_certificates(out, [c.user for c in creds], router_hosts, days)
     return [c.user for c in creds]
 
 

@@ -25,6 +25,7 @@ from schemas import DecodeError, Keys, decode, encode
 from schemas.arrays import DEFAULT_MAX_ARRAY_BYTES
 from schemas.messages import Message
 from services.common.access import load_credential
+from services.common.tls import TLS_KEY, TlsError, client_tls, is_tls
 
 log = logging.getLogger(__name__)
 
@@ -49,6 +50,12 @@ class BusConfig(BaseModel):
         description="folder from `spacemap credentials`: each process logs in as its own "
         "user from it (the router reads its dictionary); None: no authentication",
     )
+    tls: bool = Field(
+        default=True,
+        description="with credentials, links must be TLS (tls/ endpoints; mutual TLS with "
+        "the folder's CA and each user's certificate); false allows plain tcp/ (logins "
+        "and access control still apply, the traffic is not encrypted)",
+    )
 
 
 def zenoh_config(
@@ -61,9 +68,11 @@ def zenoh_config(
     login: tuple[str, str] | None = None,
     dictionary_file: str | None = None,
     access_control: dict[str, Any] | None = None,
+    tls: dict[str, object] | None = None,
 ) -> zenoh.Config:
     """The one set of session flags every spacemap process uses. `login` (user, password):
-    a client's identity; `dictionary_file` and `access_control`: the router's."""
+    a client's identity; `dictionary_file` and `access_control`: the router's; `tls`: the
+    `transport/link/tls` settings (services.common.tls), which also limit links to TLS."""
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("scouting/multicast/enabled", "false")
@@ -83,6 +92,10 @@ def zenoh_config(
         conf.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(dictionary_file))
     if access_control is not None:
         conf.insert_json5("access_control", json.dumps(access_control))
+    if tls is not None:
+        conf.insert_json5("transport/link/protocols", json.dumps(["tls"]))
+        for name, value in tls.items():
+            conf.insert_json5(f"{TLS_KEY}/{name}", json.dumps(value))
     return conf
 
 
@@ -96,20 +109,47 @@ def login_for(config: BusConfig, identity: str | None) -> tuple[str, str] | None
     return cred.user, cred.password
 
 
+def tls_for(config: BusConfig, identity: str | None) -> dict[str, object] | None:
+    """The client TLS settings of `identity` for `config.connect`, None on a plain link;
+    TlsError when the endpoint and the config disagree or a certificate is unusable."""
+    if is_tls(config.connect):
+        if config.credentials is None or identity is None:
+            raise TlsError(f"{config.connect} is a TLS endpoint: set bus.credentials to a "
+                           "folder from `spacemap credentials` (its CA and this process's "
+                           "certificate)")
+        return client_tls(config.credentials, identity)
+    if config.tls and config.credentials is not None:
+        raise TlsError(f"bus.tls is on but bus.connect is {config.connect!r}: connect with "
+                       "tls/HOST:PORT, or set bus.tls=false to send logins over plain TCP")
+    return None
+
+
 @contextmanager
 def open_session(config: BusConfig, identity: str | None = None) -> Iterator[zenoh.Session]:
     """A client session connected to the router of `config`, logged in as `identity`
-    (services.common.access.identity) when the config names a credentials folder."""
-    session = zenoh.open(
-        zenoh_config(
-            "client",
-            connect=[config.connect],
-            shared_memory=config.shared_memory,
-            connect_timeout_s=config.connect_timeout_s,
-            lease_s=config.lease_s,
-            login=login_for(config, identity),
+    (services.common.access.identity) when the config names a credentials folder, over
+    mutual TLS when `config.connect` is a tls/ endpoint."""
+    login = login_for(config, identity)
+    tls = tls_for(config, identity)
+    try:
+        session = zenoh.open(
+            zenoh_config(
+                "client",
+                connect=[config.connect],
+                shared_memory=config.shared_memory,
+                connect_timeout_s=config.connect_timeout_s,
+                lease_s=config.lease_s,
+                login=login,
+                tls=tls,
+            )
         )
-    )
+    except zenoh.ZError:
+        if tls is not None:  # zenoh only says "timeout": name what to check
+            log.error("no TLS session with %s as %s: the router must run with a certificate "
+                      "from the same `spacemap credentials` folder as %s, made for this host "
+                      "name (--router-host); the router's log names the refused handshake",
+                      config.connect, identity, tls["root_ca_certificate"])
+        raise
     try:
         yield session
     finally:

@@ -11,7 +11,8 @@ from services.common.bus import BusConfig, open_session
 def is_alive(config: BusConfig, role: str, ident: int | str = 0, timeout_s: float = 3.0,
              login_as: str = "monitor") -> bool:
     """True when `alive/{role}/{ident}` is declared; for the router, when it accepts a session
-    (with credentials: logs in as `login_as`, any user may read liveliness)."""
+    (with credentials: logs in as `login_as`, any user may read liveliness). A missing or
+    unusable certificate raises services.common.tls.TlsError: a probe cannot fix that."""
     probe = config.model_copy(update={"connect_timeout_s": timeout_s})
     try:
         with open_session(probe, login_as) as session:

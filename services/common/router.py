@@ -10,8 +10,29 @@ import zenoh
 
 from services.common.access import DICTIONARY, acl_config, credentials_robots
 from services.common.bus import zenoh_config
+from services.common.tls import TlsError, is_tls, router_names, router_tls
 
 log = logging.getLogger(__name__)
+
+
+def default_listen(credentials: str | None, tls: bool) -> list[str]:
+    """Where `spacemap router` listens without --listen: TLS when it has credentials."""
+    return ["tls/0.0.0.0:7447" if credentials is not None and tls else "tcp/0.0.0.0:7447"]
+
+
+def _check_links(listen: list[str], credentials: str | None, tls: bool) -> bool:
+    """True when the router listens on TLS; TlsError for a mix it cannot secure."""
+    secure = [is_tls(e) for e in listen]
+    if any(secure) and not all(secure):
+        raise TlsError(f"listen endpoints {listen} mix tls/ and plain links: the access "
+                       "rules bind to client certificates, so use tls/ for all of them")
+    if any(secure) and credentials is None:
+        raise TlsError("tls/ endpoints need bus.credentials (a folder from `spacemap "
+                       "credentials` with the CA and the router's certificate)")
+    if not any(secure) and credentials is not None and tls:
+        raise TlsError(f"bus.tls is on but the router would listen on {listen}: listen on "
+                       "tls/HOST:PORT, or set bus.tls=false to accept logins over plain TCP")
+    return all(secure)
 
 
 def run_router(
@@ -20,17 +41,27 @@ def run_router(
     lease_s: float = 10.0,
     credentials: str | None = None,
     prefix: str = "spacemap",
+    tls: bool = True,
 ) -> None:
     """Serve as the mission's router until `stop` is set. With `credentials` (a folder from
-    `spacemap credentials`) only its users may connect, each only on its role's keys."""
-    secure = {}
+    `spacemap credentials`) only its users may connect, each only on its role's keys; on
+    tls/ endpoints every client must also show its own certificate from the folder's CA."""
+    on_tls = _check_links(listen, credentials, tls)
+    secure: dict = {}
     if credentials is not None:
         robots = credentials_robots(credentials)
         secure = {"dictionary_file": str(Path(credentials) / DICTIONARY),
-                  "access_control": acl_config(prefix, robots)}
+                  "access_control": acl_config(prefix, robots, mtls=on_tls)}
         log.info("authentication on, access control for %d robots under %s/", robots, prefix)
     else:
         log.warning("no credentials: any client may connect and publish on any key")
+    if on_tls:
+        assert credentials is not None
+        secure["tls"] = router_tls(credentials)
+        zenoh.init_log_from_env_or("warn")  # refused handshakes (unknown CA, no certificate)
+        log.info("mutual TLS: certificate for %s", ", ".join(router_names(credentials)))
+    elif credentials is not None:
+        log.warning("plain TCP: logins and traffic are not encrypted (bus.tls=false)")
     session = zenoh.open(zenoh_config("router", listen=listen, lease_s=lease_s, **secure))
     log.info("zenoh router listening on %s", ", ".join(listen))
     try:

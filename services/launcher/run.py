@@ -77,14 +77,17 @@ def run_mission(
     secrets_dir: str | None = None
     try:
         if router_endpoint is None:
-            # our own router: fresh logins for this run only, kept out of the run folder
+            # our own router: fresh logins and certificates for this run only, kept out of
+            # the run folder; mutual TLS on loopback unless bus.tls=false
             secrets_dir = tempfile.mkdtemp(prefix="spacemap-credentials-")
-            make_credentials(Path(secrets_dir), config.sim.robots)
+            make_credentials(Path(secrets_dir), config.sim.robots, days=7)
             config = _with_bus(config, credentials=secrets_dir)
-            router_endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+            scheme = "tls" if config.bus.tls else "tcp"
+            router_endpoint = f"{scheme}/127.0.0.1:{free_tcp_port()}"
             group.start("router", spacemap_command(
                 "router", "--listen", router_endpoint, "--set", f"bus.credentials={secrets_dir}",
-                "--set", f"bus.prefix={config.bus.prefix}"))
+                "--set", f"bus.prefix={config.bus.prefix}",
+                "--set", f"bus.tls={str(config.bus.tls).lower()}"))
         config = _with_bus(config, connect=router_endpoint)
         metrics = _record(config, out_dir, group, stall_timeout_s, console, sample_every_s,
                           log_level, view)
