@@ -13,10 +13,15 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from schemas import messages as m
-from schemas.codec import peek_tick
+from schemas.codec import decode, peek_tick
+from schemas.errors import DecodeError
 from services.common.bus import Bus, Inbound, Presence
 
 log = logging.getLogger(__name__)
+
+# robot topics whose bytes are the mission's traffic, and what each must decode as
+COUNTED: dict[str, type[m.Message]] = {
+    "pose": m.RobotPose, "submap": m.Submap, "cmd_vel": m.CmdVel, "goal_status": m.GoalStatus}
 
 
 @dataclass
@@ -83,7 +88,7 @@ class Monitor:
         self.ever_alive: set[tuple[str, str]] = set()
         self.series: list[Snapshot] = []
         self._bytes: Counter[tuple[int, int]] = Counter()  # (robot, tick) → payload bytes
-        self.bad_taps: Counter[str] = Counter()
+        self.bad_taps: Counter[tuple[str, str]] = Counter()  # (key, reason)
         self.sinks: list[MessageSink] = []
         self._bytes_lock = threading.Lock()
         keys = bus.keys
@@ -100,26 +105,30 @@ class Monitor:
                 return tick is None or tick % camera_every_ticks == 0
 
             bus.subscribe(keys.any_robot("rgbd"), m.RgbdFrame, keep)
-        for topic in ("pose", "submap", "cmd_vel", "goal_status"):
-            bus.tap(keys.any_robot(topic), self._count)
+        for topic, kind in COUNTED.items():
+            bus.tap(keys.any_robot(topic), lambda key, payload, kind=kind: self._count(
+                key, payload, kind))
         bus.watch_liveliness()
         if declare:
             bus.declare_alive("monitor", 0)
 
-    def _count(self, key: str, payload: bytes) -> None:
+    def _count(self, key: str, payload: bytes, kind: type[m.Message]) -> None:
         """Bytes per (robot, tick): the tick, not the arrival time, decides what counts, so a
         lockstep run's totals do not depend on which of the last tick's messages arrived before
-        the run was read out."""
+        the run was read out. Only messages the robot's own processes would accept count
+        (valid, of the key's kind, naming the key's robot): a bad message is no traffic."""
         try:
             robot = self.bus.keys.robot_id(key)
-        except ValueError:
-            robot = None
-        tick = peek_tick(payload)
-        if robot is None or tick is None:
-            self.bad_taps[key] += 1
-            if self.bad_taps[key] == 1:
-                log.warning("dropped an undecodable message on %s (not counted)", key)
+            msg = decode(payload, kind)
+            if getattr(msg, "robot_id", robot) != robot:
+                raise DecodeError("wrong robot", f"{msg.robot_id} on {key}")
+        except (ValueError, DecodeError) as exc:
+            reason = exc.reason if isinstance(exc, DecodeError) else "bad key"
+            self.bad_taps[(key, reason)] += 1
+            if self.bad_taps[(key, reason)] == 1:
+                log.warning("dropped a message on %s (%s): not counted", key, reason)
             return
+        tick = msg.tick
         with self._bytes_lock:
             self._bytes[(robot, tick)] += len(payload)
 
