@@ -27,6 +27,7 @@ MAX_K = 123  # ρ ≤ K also fits the signed field `unpack_fields` undoes
 _BIAS = np.array([0, 512, 512, 512, 0], np.int64)
 LANES = 2  # stencil columns interleaved in one word
 WORD_Z = 64 // LANES  # z cells one lane holds (a band of z plus the stencil's reach)
+EXACT_BITS = 53  # float64 sums of distinct powers of two below 2^53 are exact
 
 
 def pack_fields(rows: np.ndarray) -> np.ndarray:
@@ -121,13 +122,18 @@ def ball_sums(indices: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     margin = pad * (ny + 1)  # |dx·ny + dy| of any stencil column
     groups = _groups(np.ascontiguousarray(offsets, np.int64).tobytes(), len(offsets))
     out = np.empty(n, np.int64)
-    for z0 in range(0, int(z.max()) + 1, band):
-        near = np.flatnonzero((z >= z0 - reach) & (z < z0 + band + reach))
-        # z cell q = z − z0 + reach of column C at bit q of lane0[C] (a column's cells are
-        # distinct powers of two below 2^32: float64 bincount sums them exactly), then at
-        # bit LANES·q
-        lane0 = _spread(np.bincount(col[near], np.ldexp(1.0, z[near] - z0 + reach),
-                                    ncol).astype(np.uint64))
+    z_top = int(z.max()) + 1
+    full_lo, full = 0, None
+    for z0 in range(0, z_top, band):
+        if full is None or min(z0 + band + reach, z_top) > full_lo + EXACT_BITS:
+            # z cell of column C at bit z − full_lo of full[C]: a column's cells are distinct
+            # powers of two below 2^53, so a float64 bincount sums them exactly
+            full_lo = z0 - reach
+            near = np.flatnonzero((z >= full_lo) & (z < full_lo + EXACT_BITS))
+            cn, zn = (col, z) if near.size == n else (col[near], z[near])
+            full = np.bincount(cn, np.ldexp(1.0, zn - full_lo), ncol).astype(np.uint64)
+        # this band's lane: cells z0 − reach ≤ z < z0 + band + reach at bit LANES·(z − z0 + reach)
+        lane0 = _spread((full >> np.uint64(z0 - reach - full_lo)) & np.uint64(0xFFFFFFFF))
         sel = np.flatnonzero((z >= z0) & (z < z0 + band))
         if z0 == 0 and sel.size == n:
             sel = slice(None)  # one band holds every voxel: no index copies
@@ -135,23 +141,28 @@ def ball_sums(indices: np.ndarray, offsets: np.ndarray) -> np.ndarray:
         start = np.uint64(LANES) * (z[sel] - z0).astype(np.uint64)
         acc = np.full(c.shape[0], _BIAS_PACKED)  # every field ends ≥ 0: no borrows to undo
         w = np.empty(c.shape[0], np.uint64)
+        looked_up = np.empty(c.shape[0], np.int64)  # reused buffers; "clip": unbuffered `out`
         # lanes shifted down by the reach − h cells no window of half-height h reads: every
         # window then starts at bit LANES·(z − z0); `margin` zero words each side make every
         # column shift a plain slice
         padded = np.zeros(ncol + 2 * margin, np.uint64)
         padded[margin : margin + ncol] = lane0
-        lanes = {(h, j): (padded >> np.uint64(LANES * (reach - h))) << np.uint64(j)
-                 for h, j in {(g[1], j) for g in groups for j in range(len(g[0]))}}
+        lanes = {}
+        for dxdy, h, _ in groups:
+            if (h, 0) not in lanes:
+                lanes[h, 0] = padded >> np.uint64(LANES * (reach - h)) if h < reach else padded
+            if len(dxdy) > 1 and (h, 1) not in lanes:
+                lanes[h, 1] = lanes[h, 0] << np.uint64(1)
         words = np.empty(ncol, np.uint64)
         for dxdy, h, table in groups:
             # lane j of word C holds column C + dxdy[j]
             shifted = [lanes[h, j][margin + s : margin + s + ncol]
                        for j, s in enumerate(dxdy[:, 0] * ny + dxdy[:, 1])]
             src = np.bitwise_or(*shifted, out=words) if len(shifted) == 2 else shifted[0]
-            np.take(src, c, out=w)
+            np.take(src, c, out=w, mode="clip")
             w >>= start
             w &= np.uint64((1 << (LANES * (2 * h + 1))) - 1)
-            acc += np.take(table, w.view(np.int64))
+            acc += np.take(table, w.view(np.int64), out=looked_up, mode="clip")
         out[sel] = acc
     return _unpack_biased(out)
 

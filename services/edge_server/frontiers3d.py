@@ -41,7 +41,8 @@ def full_ball_variance(offsets: np.ndarray) -> float:
 
 def gather_sums(indices: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """(5, N) int64 [ρ, Σo, Σ|o|²] by gathering all K stencil cells of every voxel: any
-    stencil; the reference `ball_sums` is checked against (tests/test_edge_frontier_ball_sums.py)."""
+    stencil; the reference `ball_sums` is checked against
+    (tests/test_edge_frontier_ball_sums.py)."""
     n = indices.shape[0]
     pad = int(np.abs(offsets).max())
     lo = indices.min(axis=0) - pad
