@@ -3,7 +3,8 @@
 The map: the built-in house's sensed surfaces (services.evaluator.surfaces) sampled at
 `--density` points/m², voxelized at ϱ = 0.05 m (what P* looks like once explored: voxel
 centres), optionally cropped to z ≤ `--z-max`. Timed (medians of `--repeats`):
-- ours: `detect_point_frontiers` (downsample, exact ρ and σ² within r_s, both masks);
+- ours: `detect_point_frontiers` (downsample, exact ρ and σ² within r_s from per-column z bit
+  masks and lookup tables, `ball_sums.py`, both masks);
 - baseline: the paper's per-point loop with a scipy cKDTree (query_ball_point per point, then
   count and variance per point), the same cloud and r_s, timed once (it is slow).
 Both are checked to give the same ρ and σ².

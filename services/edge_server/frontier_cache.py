@@ -14,34 +14,10 @@ from __future__ import annotations
 import numpy as np
 
 from services.common.voxels import unpack
+from services.edge_server.ball_sums import MAX_K, pack_fields, unpack_fields
 from services.edge_server.frontiers3d import PointFrontiers, ball_offsets, full_ball_variance
 
 CHUNK_VOX = 32  # the box grows in steps of this many voxels per axis (few reallocations)
-# One int64 per cell holds all five sums as signed bit fields (ρ, Σo_x, Σo_y, Σo_z, Σ|o|²):
-# addition is linear, so adding packed contributions adds every field at once; fields are
-# wide enough for any stencil with r_s ≤ 3 voxels (K ≤ 123: |Σo| ≤ 369, Σ|o|² ≤ 1107).
-FIELD_BITS = (9, 10, 10, 10, 12)
-
-
-def pack_fields(rows: np.ndarray) -> np.ndarray:
-    """(..., 5) signed ints → (...) int64 packed sums."""
-    out = np.zeros(rows.shape[:-1], np.int64)
-    shift = 0
-    for i, bits in enumerate(FIELD_BITS):
-        out += rows[..., i].astype(np.int64) << shift
-        shift += bits
-    return out
-
-
-def unpack_fields(packed: np.ndarray) -> np.ndarray:
-    """(N,) int64 packed sums → (5, N) int64 fields (lowest field first, borrows undone)."""
-    v = packed.copy()
-    out = np.empty((len(FIELD_BITS), packed.size), np.int64)
-    for i, bits in enumerate(FIELD_BITS):
-        half = 1 << (bits - 1)
-        out[i] = ((v + half) & ((1 << bits) - 1)) - half
-        v = (v - out[i]) >> bits
-    return out
 
 
 class LatticeStats:
@@ -49,7 +25,7 @@ class LatticeStats:
 
     def __init__(self, radius_vox: float) -> None:
         self.offsets = ball_offsets(radius_vox)
-        if len(self.offsets) > 123:
+        if len(self.offsets) > MAX_K:
             raise ValueError("r_s > 3 voxels overflows the packed sums (FIELD_BITS)")
         self.pad = int(np.abs(self.offsets).max())
         self.lo = np.zeros(3, np.int64)
