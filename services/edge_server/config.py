@@ -80,6 +80,10 @@ class EdgeConfig(BaseModel):
                                            "potential_scale (per m of path)")
     rrt_iterations: int = Field(default=600, ge=1)
     rrt_step_m: float = Field(default=0.5, gt=0, description="RRT steer step η")
+    rrt_keep_tree: bool = Field(
+        default=True, description="the tree grows on from the nodes of earlier plans, as "
+        "rrt_exploration's global detector (false: a fresh tree each plan, which stopped "
+        "finding the last frontiers and ended house missions at 88-95 % 3D)")
     seed: int = Field(default=0, description="mission seed (RRT sampling)")
     # map merger
     merge: bool = Field(default=False, description="pose graph + registration corrections "

@@ -25,6 +25,7 @@ from schemas.messages import (
     RobotPose,
     Submap,
 )
+from services.common.grid import GridSpec
 from services.edge_server.assignment import make_scorer
 from services.edge_server.completion import CompletionJudge, VisitLog
 from services.edge_server.config import EdgeConfig
@@ -110,6 +111,8 @@ class EdgePlanner:
                                          config.density_threshold, config.variance_threshold_m2,
                                          config.frontier_z_max_m)
         self._alg1_version = -1
+        self._rrt_tree_xy = np.zeros((0, 2))  # the RRT's nodes, world (y, x) metres
+        self._rrt_points_yx = np.zeros((0, 2))  # its frontier points not yet seen, likewise
         self.inflation = InflationCache()
         self.visits = VisitLog(config.weak_visit_range_m, math.radians(config.weak_visit_fov_deg))
 
@@ -182,12 +185,30 @@ class EdgePlanner:
         if cfg.planner == "rrt":
             starts = [fields.starts[r] for r in sorted(fields.starts)]
             rng = np.random.default_rng([cfg.seed, tick])
-            mask = rrt_frontier_mask(traversable, snap.known, starts, cfg.rrt_iterations,
-                                     cfg.rrt_step_m / spec.resolution_m, rng)
+            origin_yx = np.array([spec.origin_y, spec.origin_x])
+            tree_rc = None
+            if cfg.rrt_keep_tree and len(self._rrt_tree_xy):
+                tree_rc = (self._rrt_tree_xy - origin_yx) / spec.resolution_m - 0.5
+            mask, tree = rrt_frontier_mask(traversable, snap.known, starts, cfg.rrt_iterations,
+                                           cfg.rrt_step_m / spec.resolution_m, rng, tree_rc)
+            # kept in world (y, x): the grid's origin moves as the map grows
+            self._rrt_tree_xy = (tree + 0.5) * spec.resolution_m + origin_yx
+            if cfg.rrt_keep_tree:  # rrt_exploration's filter: points stay until seen
+                mask |= self._kept_rrt_points(snap.known, spec, origin_yx)
+                self._rrt_points_yx = (np.argwhere(mask) + 0.5) * spec.resolution_m + origin_yx
             link = int(round(cfg.frontier_link_m / spec.resolution_m))
             mask = ndimage.binary_dilation(mask, np.ones((2 * link + 1,) * 2, bool)) & ~snap.known
             return frontier_set(mask, reachable, spec, 1, cfg.goal_max_offset_m, goal_edt)
         return detect_frontiers(snap.free, snap.known, reachable, spec, cfg, goal_edt)
+
+    def _kept_rrt_points(self, known: np.ndarray, spec: GridSpec,
+                         origin_yx: np.ndarray) -> np.ndarray:
+        """(H, W) bool: frontier points of earlier plans whose cell is still unknown."""
+        mask = np.zeros(known.shape, bool)
+        rc = np.floor((self._rrt_points_yx - origin_yx) / spec.resolution_m).astype(np.int64)
+        rc = rc[spec.contains(rc)]
+        mask[rc[:, 0], rc[:, 1]] = True
+        return mask & ~known
 
     def plan(self, tick: int) -> PlanOutput:
         corrections = self._merge(tick)

@@ -1,6 +1,8 @@
 """RRT frontier detection in the style of rrt_exploration (Umari & Mukhopadhyay, IROS 2017).
 
-A tree grows from every robot's start cell over the traversable part of the merged grid:
+A tree grows from every robot's start cell over the traversable part of the merged grid
+(and, as rrt_exploration's global detector, from the nodes it kept from earlier plans, so
+it reaches frontiers far from the robots that one plan's samples would miss):
 sample a cell uniformly in the grid, steer from the nearest tree node by at most η, and walk
 the segment. A segment that reaches an unknown cell yields a frontier point there (the tree
 does not grow into it); one that hits a non-traversable known cell is dropped; otherwise the
@@ -24,15 +26,24 @@ def _walk(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def rrt_frontier_mask(
     traversable: np.ndarray, known: np.ndarray, starts_rc: list[tuple[int, int]],
     iterations: int, step_cells: float, rng: np.random.Generator,
-) -> np.ndarray:
-    """(H, W) bool: frontier points found by a multi-root RRT."""
+    tree_rc: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """((H, W) bool frontier points found by a multi-root RRT, (N, 2) float its nodes).
+    `tree_rc`: nodes (row, col) kept from earlier plans; those now off the traversable grid
+    are dropped."""
     H, W = traversable.shape
     mask = np.zeros((H, W), bool)
     if not starts_rc:
-        return mask
-    nodes = np.zeros((len(starts_rc) + iterations, 2))
-    nodes[: len(starts_rc)] = np.asarray(starts_rc, np.float64)
-    count = len(starts_rc)
+        return mask, np.zeros((0, 2))
+    roots = np.asarray(starts_rc, np.float64).reshape(-1, 2)
+    if tree_rc is not None and len(tree_rc):
+        cell = np.round(tree_rc).astype(np.int64)
+        inside = (cell[:, 0] >= 0) & (cell[:, 0] < H) & (cell[:, 1] >= 0) & (cell[:, 1] < W)
+        kept = tree_rc[inside][traversable[cell[inside, 0], cell[inside, 1]]]
+        roots = np.concatenate([roots, kept])
+    nodes = np.zeros((len(roots) + iterations, 2))
+    nodes[: len(roots)] = roots
+    count = len(roots)
     samples = rng.uniform([0, 0], [H - 1, W - 1], size=(iterations, 2))
     for x in samples:
         d2 = ((nodes[:count] - x) ** 2).sum(axis=1)
@@ -50,4 +61,4 @@ def rrt_frontier_mask(
         elif first_blocked == len(cells):
             nodes[count] = new
             count += 1
-    return mask
+    return mask, nodes[len(starts_rc):count]
