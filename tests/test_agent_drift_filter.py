@@ -183,3 +183,16 @@ def test_frames_join_the_map_only_once_the_robot_moved_enough() -> None:
                    for k, o in enumerate(outcomes))
     assert inserted[0.0] == 10 and 2 <= inserted[0.1] <= 6
     assert accepted[0.1] >= accepted[0.0] - 1  # fewer inserts, as many registrations
+
+
+def test_a_frame_that_matched_few_points_is_a_weaker_measurement() -> None:
+    from services.robot_agent.drift_filter import overlap_inflation
+    on = FilterParams(full_overlap_frac=0.7)
+    assert overlap_inflation(0.9, on) == 1.0 and overlap_inflation(0.35, on) == 2.0
+    assert overlap_inflation(0.35, PARAMS) == 1.0  # off by default
+    P = _settled_P(20, 0.0)
+    R = measurement_cov(None, 0.0, PARAMS)
+    yaw = np.array([0.0, 0.0, 0.004])
+    strong = fuse(np.zeros(3), P, yaw, R, PARAMS).xyyaw[2]
+    weak = fuse(np.zeros(3), P, yaw, R * overlap_inflation(0.2, on), PARAMS).xyyaw[2]
+    assert 0.0 < weak < strong  # believed less

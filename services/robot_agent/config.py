@@ -85,6 +85,9 @@ class AgentConfig(BaseModel):
         "this far from the last one that did (0 = every frame)")
     reg_insert_min_rad: float = Field(
         default=0.0, ge=0, description="... or turned this much from it, rad")
+    reg_full_overlap_frac: float = Field(
+        default=0.0, ge=0, le=1, description="a registration whose inlier share is below "
+        "this is weaker by the ratio (R inflated); 0 = every registration alike")
     reg_sigma_m: float = Field(
         default=0.005, gt=0, description="σ of one registration along its strong directions, m")
     reg_sigma_rad: float = Field(

@@ -46,6 +46,9 @@ class FilterParams:
     # loses a turn at its own rate (1 % scale, random walk), so during a turn the drift the
     # registrations imply grows frame by frame (docs/agent.md, "A reproducible turn lost")
     reacquire_rad_per_rad: float = 0.0
+    # a frame that matched fewer than this share of its points (new ground) is a weaker
+    # measurement: R grows by full_overlap_frac / inlier fraction (0 = never)
+    full_overlap_frac: float = 0.0
     reacquire_m_per_m: float = 0.0
 
 
@@ -84,6 +87,16 @@ def measurement_cov(H6: np.ndarray | None, yaw: float, params: FilterParams) -> 
     out[:2, :2] = rot @ R_t @ rot.T
     out[2, 2] = params.r_rad**2
     return out
+
+
+def overlap_inflation(inlier_frac: float, params: FilterParams) -> float:
+    """How much weaker than R a registration is that matched `inlier_frac` of its points:
+    the fewer old points a frame sees, the more one mis-weighted patch moves it (AWS house: a
+    robot turning into a new room accepted seven such frames, each 0.2-0.4° the same wrong
+    way)."""
+    if params.full_overlap_frac <= 0:
+        return 1.0
+    return max(1.0, params.full_overlap_frac / max(inlier_frac, 1e-3))
 
 
 def _coupled_cov(H6: np.ndarray, yaw: float, params: FilterParams) -> np.ndarray:

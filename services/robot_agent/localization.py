@@ -29,6 +29,7 @@ from services.robot_agent.drift_filter import (
     agree,
     fuse,
     measurement_cov,
+    overlap_inflation,
     predict,
 )
 from services.robot_agent.voxel_map import LazyLruVoxelMap
@@ -131,8 +132,9 @@ class FrameRegistrar:
         return outcome
 
     def align(self, cloud: small_gicp.PointCloud, guess: np.ndarray,
-              ) -> tuple[np.ndarray, np.ndarray] | str:
-        """(planar T_loc_base, GICP Hessian) of one frame against the map, or why not."""
+              ) -> tuple[np.ndarray, np.ndarray, float] | str:
+        """(planar T_loc_base, GICP Hessian, inlier fraction) of one frame against the map,
+        or why not."""
         p = self.params
         res = small_gicp.align(
             self.voxelmap, cloud, guess, max_correspondence_distance=p.max_corr_m,
@@ -142,7 +144,7 @@ class FrameRegistrar:
             return "not converged"
         if res.num_inliers < p.min_inlier_frac * cloud.size():
             return "few inliers"
-        return planar(res.T_target_source), np.asarray(res.H)
+        return planar(res.T_target_source), np.asarray(res.H), res.num_inliers / cloud.size()
 
     def insert(self, cloud: small_gicp.PointCloud, T_loc_base: np.ndarray) -> None:
         self.voxelmap.insert(cloud, T_loc_base)
@@ -252,10 +254,10 @@ class Localizer:
         if isinstance(aligned, str):  # new ground the map does not cover yet: keep odometry
             reg.insert(cloud, guess)
             return RegistrationOutcome(guess, False, aligned)
-        T_reg, H = aligned
+        T_reg, H, inliers = aligned
         meas = np.array(xyyaw_from_T(T_reg))
-        fusion = fuse(np.array(xyyaw_from_T(guess)), self.P, meas,
-                      measurement_cov(H, meas[2], filt), filt)
+        R = measurement_cov(H, meas[2], filt) * overlap_inflation(inliers, filt)
+        fusion = fuse(np.array(xyyaw_from_T(guess)), self.P, meas, R, filt)
         if not fusion.accepted:
             T_odom_base = invert(self.T_loc_odom) @ guess
             self._rejected = self._rejected[-filt.reacquire_frames:] + [
@@ -265,7 +267,7 @@ class Localizer:
                                            fusion.mahalanobis2)
             self.outcomes["reacquired"] += 1
             self._rejected = []
-            self.P = measurement_cov(H, meas[2], filt)
+            self.P = R
             reg.insert(cloud, T_reg)
             reg.n_accepted += 1
             return RegistrationOutcome(T_reg, True, "", T_reg, fusion.mahalanobis2)

@@ -18,7 +18,8 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
         insert_min_m=cfg.reg_insert_min_m, insert_min_rad=cfg.reg_insert_min_rad,
         filter=FilterParams(reacquire_rad_per_rad=cfg.reg_reacquire_rad_per_rad,
                             coupled_length_m=cfg.reg_coupled_length_m,
-                            r_m=cfg.reg_sigma_m, r_rad=cfg.reg_sigma_rad)
+                            r_m=cfg.reg_sigma_m, r_rad=cfg.reg_sigma_rad,
+                            full_overlap_frac=cfg.reg_full_overlap_frac)
         if cfg.reg_fusion == "filter" else None,
     )
 
