@@ -68,7 +68,7 @@ def test_two_robot_mission_over_the_bus(tmp_path: Path) -> None:
                      monitor, group, 240, "a goal for every robot")
             wait_for(lambda: any(t.goals_reached for t in monitor.tracks.values()),
                      monitor, group, 300, "a reached goal")
-            wait_for(lambda: monitor.sim_time_s >= 30.0, monitor, group, 300, "30 s of sim time")
+            wait_for(lambda: monitor.sim_time_s >= 40.0, monitor, group, 300, "40 s of sim time")
             assert int((monitor.grid.cells >= 0).sum()) > 2 * first_known, "the map did not grow"
             for robot, track in monitor.tracks.items():
                 xy = np.asarray(track.gt_xyyaw)[:, :2]
