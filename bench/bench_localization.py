@@ -109,7 +109,9 @@ def load_or_record(run_dir: Path) -> Recording:
                          z["K"], z["T_base_cam"], float(z["range_m"]))
     t0 = time.perf_counter()
     rec = record(run_dir)
-    np.savez(cache, **{k: getattr(rec, k) for k in Recording.__dataclass_fields__})
+    partial = cache.with_suffix(f".{os.getpid()}.npz")  # replays in parallel share the cache
+    np.savez(partial, **{k: getattr(rec, k) for k in Recording.__dataclass_fields__})
+    partial.replace(cache)
     log.info("rendered %d frames per robot in %.0f s", len(rec.frame_ticks),
              time.perf_counter() - t0)
     return rec

@@ -179,6 +179,7 @@ class AgentCore:
             self.mapper.next_id = odom.tick * SUBMAP_IDS_PER_EPOCH
         p = odom.pose_odom
         T_odom_base = T_from_xyyaw(p.x, p.y, p.yaw)
+        self.localizer.observe_odometry(T_odom_base)
         deltas: list[SubmapDelta] = []
         if self.resend_pending:
             deltas += self.mapper.resend_all()

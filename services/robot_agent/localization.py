@@ -32,6 +32,11 @@ from services.robot_agent.drift_filter import (
     overlap_inflation,
     predict,
 )
+from services.robot_agent.odometry_calibration import (
+    CalibratedOdometry,
+    CalibrationParams,
+    is_good_registration,
+)
 from services.robot_agent.voxel_map import LazyLruVoxelMap
 
 
@@ -62,6 +67,12 @@ class RegistrationParams:
     # frame that did (0 = every frame); fewer inserts, fewer registration errors built in
     insert_min_m: float = 0.0
     insert_min_rad: float = 0.0
+    # with the filter: learn odometry's scale, turn scale and heading bias from segments
+    # between good registrations, and correct the odometry by them (None = raw odometry)
+    calibration: CalibrationParams | None = None
+    # with the filter: a frame GICP did not converge on joins the map at the odometry guess
+    # (False: it stays out, as frames of new ground do not)
+    insert_unconverged: bool = True
 
 
 @dataclass(frozen=True)
@@ -202,7 +213,10 @@ def drop_weak_translation(step: np.ndarray, H6: np.ndarray, ratio: float) -> np.
 
 
 class Localizer:
-    """T_loc_odom, the drift registration found: T_loc_base = T_loc_odom · T_odom_base."""
+    """T_loc_odom, the drift registration found: T_loc_base = T_loc_odom · T_odom_base.
+
+    With odometry calibration `odom` is the corrected odometry chain (`CalibratedOdometry`);
+    callers still pass the raw odometry poses, each tick through `observe_odometry`."""
 
     def __init__(self, params: RegistrationParams) -> None:
         self.registrar = FrameRegistrar(params)
@@ -212,9 +226,23 @@ class Localizer:
         self._T_odom_prev: np.ndarray | None = None
         # each rejected registration's T_loc_base and its frame's T_odom_base (x, y, yaw)
         self._rejected: list[tuple[np.ndarray, np.ndarray]] = []
+        self.odometry = (CalibratedOdometry(params.calibration)
+                         if params.calibration is not None and params.filter is not None
+                         else None)
+
+    def observe_odometry(self, T_odom_raw: np.ndarray) -> None:
+        """Integrate one raw odometry pose into the corrected chain (every tick)."""
+        if self.odometry is not None:
+            self.odometry.observe(np.array(xyyaw_from_T(T_odom_raw)))
+
+    def _calibrated(self, T_odom_raw: np.ndarray) -> np.ndarray:
+        if self.odometry is None:
+            return T_odom_raw
+        return T_from_xyyaw(*self.odometry.corrected(np.array(xyyaw_from_T(T_odom_raw))))
 
     def guess(self, T_odom_base: np.ndarray) -> np.ndarray:
-        return self.T_loc_odom @ T_odom_base
+        """T_loc_base for a raw odometry pose at or after the last one observed."""
+        return self.T_loc_odom @ self._calibrated(T_odom_base)
 
     def update(self, points_base: np.ndarray, T_odom_base: np.ndarray,
                removed_frac: float = 0.0) -> RegistrationOutcome:
@@ -225,16 +253,19 @@ class Localizer:
         Except the first: robots start close together, and a map anchored only after the
         initial turn in place would keep that turn's odometry error (0.44° in missions)."""
         filt = self.registrar.params.filter
+        self.observe_odometry(T_odom_base)
+        T_odom_base = self._calibrated(T_odom_base)
+        guess = self.T_loc_odom @ T_odom_base
         if filt is not None and self._T_odom_prev is not None:
-            self.P = predict(self.P, np.array(xyyaw_from_T(self.guess(self._T_odom_prev))),
-                             np.array(xyyaw_from_T(self.guess(T_odom_base))), filt)
+            self.P = predict(self.P, np.array(xyyaw_from_T(self.T_loc_odom @ self._T_odom_prev)),
+                             np.array(xyyaw_from_T(guess)), filt)
         self._T_odom_prev = T_odom_base.copy()
         if removed_frac > self.registrar.params.max_removed_frac and self.registrar.n_inserted:
-            outcome = RegistrationOutcome(self.guess(T_odom_base), False, "hidden by teammates")
+            outcome = RegistrationOutcome(guess, False, "hidden by teammates")
         elif filt is not None:
-            outcome = self._filtered(points_base, self.guess(T_odom_base), filt)
+            outcome = self._filtered(points_base, guess, filt)
         else:
-            outcome = self.registrar.register(points_base, self.guess(T_odom_base), T_odom_base)
+            outcome = self.registrar.register(points_base, guess, T_odom_base)
         self.outcomes["accepted" if outcome.accepted else outcome.reason] += 1
         # planar() re-orthonormalises, so rounding cannot pile up over thousands of frames
         self.T_loc_odom = planar(outcome.T_loc_base @ invert(T_odom_base))
@@ -252,7 +283,8 @@ class Localizer:
             return RegistrationOutcome(guess, False, "empty map")
         aligned = reg.align(cloud, guess)
         if isinstance(aligned, str):  # new ground the map does not cover yet: keep odometry
-            reg.insert(cloud, guess)
+            if aligned != "not converged" or reg.params.insert_unconverged:
+                reg.insert(cloud, guess)
             return RegistrationOutcome(guess, False, aligned)
         T_reg, H, inliers = aligned
         meas = np.array(xyyaw_from_T(T_reg))
@@ -273,6 +305,9 @@ class Localizer:
             return RegistrationOutcome(T_reg, True, "", T_reg, fusion.mahalanobis2)
         self._rejected = []
         self.P = fusion.P
+        if self.odometry is not None and is_good_registration(
+                inliers, R, self.odometry.calibration.params):
+            self.odometry.registered(meas)
         T = T_from_xyyaw(*fusion.xyyaw)
         if reg.moved_since_insert(T):
             reg.insert(cloud, T)

@@ -86,6 +86,10 @@ def handle(
             log.info("robot %d tick %d: submap traffic %.1f kB per sim second; "
                      "registrations %s", core.robot_id, msg.tick,
                      bus.bytes_out[key] / 1000.0 / sim_s, dict(core.localizer.outcomes))
+            if core.localizer.odometry is not None:
+                cal = core.localizer.odometry.calibration
+                log.info("robot %d tick %d: odometry errors %s from %d segments (%d left out)",
+                         core.robot_id, msg.tick, cal.errors, cal.n_used, cal.n_rejected)
 
 
 def _apply(core: AgentCore, msg: Message) -> None:

@@ -7,6 +7,7 @@ from services.robot_agent.drf import DrfParams
 from services.robot_agent.drift_filter import FilterParams
 from services.robot_agent.keyframe_graph import LoopParams
 from services.robot_agent.localization import RegistrationParams
+from services.robot_agent.odometry_calibration import CalibrationParams
 
 
 def registration_params(cfg: AgentConfig) -> RegistrationParams:
@@ -21,6 +22,8 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
                             r_m=cfg.reg_sigma_m, r_rad=cfg.reg_sigma_rad,
                             full_overlap_frac=cfg.reg_full_overlap_frac)
         if cfg.reg_fusion == "filter" else None,
+        calibration=CalibrationParams(segment_m=cfg.odom_calibration_segment_m)
+        if cfg.odom_calibration else None,
     )
 
 

@@ -1,0 +1,133 @@
+"""Online odometry calibration: the error model learned from good registrations."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from services.robot_agent.odometry_calibration import (
+    CalibratedOdometry,
+    CalibrationParams,
+    OdometryErrors,
+    corrected_increment,
+    is_good_registration,
+)
+from services.simulator.odometry import OdometryNoise, WheelOdometry
+
+NOISE = OdometryNoise(scale_error=0.02, yaw_scale_error=0.01, heading_bias_rad_per_m=0.005,
+                      noise_m_per_sqrt_m=0.01, noise_rad_per_sqrt_rad=0.01)
+
+
+def _path(n: int) -> list[tuple[float, float, float]]:
+    """A lawnmower drive as between shelf rows: 4 m straight at 0.4 m/s, a quarter turn in
+    place, a short leg, a quarter turn back the other way, and a little reversing."""
+    x = y = yaw = 0.0
+    poses = [(x, y, yaw)]
+    legs = [(0.4, 0.0, 100), (0.0, 0.5, 31), (0.3, 0.0, 10), (0.0, 0.5, 31), (-0.1, 0.0, 10),
+            (0.4, 0.0, 100), (0.0, -0.5, 31), (0.3, 0.0, 10), (0.0, -0.5, 31)]
+    while len(poses) <= n:
+        for v, w, ticks in legs:
+            for _ in range(ticks):
+                yaw += w * 0.1
+                x += v * 0.1 * math.cos(yaw)
+                y += v * 0.1 * math.sin(yaw)
+                poses.append((x, y, yaw))
+    return poses[: n + 1]
+
+
+def _drive(errors_known: bool, n: int = 4000) -> tuple[CalibratedOdometry, float, float]:
+    """Feed the simulator's odometry along a path, with registrations (truth + 3 mm / 0.1°
+    noise) every second tick; returns the calibration and the final raw and corrected
+    position errors."""
+    rng = np.random.default_rng(3)
+    truth = _path(n)
+    wheels = WheelOdometry(truth[0], NOISE, np.random.default_rng(7))
+    cal = CalibratedOdometry(CalibrationParams())
+    raw = np.array(truth[0])
+    for k, true in enumerate(truth):
+        if k:
+            raw = np.array(wheels.update(true, 0.1)[0])
+        cal.observe(raw)
+        if errors_known and k % 2 == 0:
+            meas = np.array(true) + rng.normal(0, [0.003, 0.003, 0.0017])
+            cal.registered(meas)
+    corrected = cal.observe(raw)
+    err = lambda p: float(np.hypot(p[0] - truth[-1][0], p[1] - truth[-1][1]))  # noqa: E731
+    return cal, err(raw), err(corrected)
+
+
+def test_the_error_model_is_learned_from_registrations() -> None:
+    cal, _, _ = _drive(True)
+    e = cal.calibration.errors
+    assert cal.calibration.n_used > 50
+    assert abs(e.scale - 0.02) < 0.003
+    assert abs(e.turn_scale - 0.01) < 0.004
+    assert abs(e.heading_bias_rad_per_m - 0.005) < 0.0015
+
+
+def test_corrected_odometry_drifts_less_than_raw() -> None:
+    _, raw_err, corrected_err = _drive(True)
+    assert raw_err > 0.3
+    assert corrected_err < 0.5 * raw_err
+
+
+def test_without_registrations_the_odometry_is_unchanged() -> None:
+    cal, raw_err, corrected_err = _drive(False, n=500)
+    assert cal.calibration.errors == OdometryErrors()
+    assert corrected_err == pytest.approx(raw_err, abs=1e-9)
+
+
+def test_a_segment_ended_by_a_slid_registration_is_left_out() -> None:
+    cal = CalibratedOdometry(CalibrationParams())
+    for k in range(12):  # straight 1 m segments, odometry exact
+        cal.observe(np.array([float(k), 0.0, 0.0]))
+        cal.registered(np.array([float(k), 0.0, 0.0]))
+    before = cal.calibration.errors
+    cal.observe(np.array([12.0, 0.0, 0.0]))
+    cal.registered(np.array([11.7, 0.0, 0.0]))  # slid 30 cm along an aisle
+    assert cal.calibration.n_rejected == 1
+    assert cal.calibration.errors == before
+
+
+def test_correction_inverts_the_error_model() -> None:
+    errors = OdometryErrors(scale=0.02, turn_scale=0.01, heading_bias_rad_per_m=0.005)
+    true = np.array([0.05, 0.001, 0.02])
+    d = math.hypot(true[0], true[1])
+    measured = np.array([1.02 * true[0], 1.02 * true[1], 1.01 * true[2] + 0.005 * d])
+    np.testing.assert_allclose(corrected_increment(measured, errors), true, atol=1e-12)
+
+
+def test_frames_of_one_wall_or_new_ground_end_no_segment() -> None:
+    params = CalibrationParams()
+    round_R = np.diag([1e-4, 1e-4, 1e-5])
+    aisle_R = np.diag([1e-2, 1e-4, 1e-5])
+    assert is_good_registration(0.9, round_R, params)
+    assert not is_good_registration(0.9, aisle_R, params)
+    assert not is_good_registration(0.5, round_R, params)
+
+
+def test_the_localizer_learns_the_scale_of_wheels_that_over_read() -> None:
+    """Back and forth across a room on wheels that read 5 % long: the localizer's
+    registrations teach it the scale, and its odometry guess is then corrected."""
+    from services.common.geometry import T_from_xyyaw, xyyaw_from_T
+    from services.robot_agent.drift_filter import FilterParams
+    from services.robot_agent.localization import Localizer, RegistrationParams
+    from tests.test_agent_localization import _room, _seen
+
+    room = _room(np.random.default_rng(4))
+    loc = Localizer(RegistrationParams(map_voxel_m=0.05, min_points=30, filter=FilterParams(),
+                                       calibration=CalibrationParams()))
+    raw = np.zeros(3)
+    true_prev = np.array([-1.5, 0.3, 0.0])
+    for k in range(241):  # twelve 2 m legs out and back, 10 cm a frame
+        x = -1.5 + 0.1 * (k % 20 if (k // 20) % 2 == 0 else 20 - k % 20)
+        true = np.array([x, 0.3, 0.0])
+        raw = raw + 1.05 * (true - true_prev) if k else np.array([-1.5, 0.3, 0.0])
+        true_prev = true
+        loc.update(_seen(room, T_from_xyyaw(*true)), T_from_xyyaw(*raw))
+    assert abs(loc.odometry.calibration.errors.scale - 0.05) < 0.01
+    # one more metre on the wheels alone: the guess follows the truth, not the wheels
+    guess = xyyaw_from_T(loc.guess(T_from_xyyaw(*(raw + np.array([1.05, 0.0, 0.0])))))
+    assert abs(guess[0] - (true[0] + 1.0)) < 0.02
