@@ -104,6 +104,10 @@ class AgentConfig(BaseModel):
         default=True, description="learn odometry's scale, turn scale and heading bias from "
         "the motion between well-registered frames and correct odometry by them (needs the "
         "filter fusion)")
+    odom_turn_sigma_per_sqrt_rad: float = Field(
+        default=0.02, gt=0, description="heading error per √rad turned the drift filter "
+        "expects of the odometry (its process noise; 0.02 covers a 1 % turn-scale error and "
+        "the 1 % random walk)")
     odom_calibration_segment_m: float = Field(
         default=1.0, gt=0, description="a calibration segment closes after this much driving")
     reg_min_points: int = Field(

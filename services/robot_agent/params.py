@@ -20,7 +20,8 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
         filter=FilterParams(reacquire_rad_per_rad=cfg.reg_reacquire_rad_per_rad,
                             coupled_length_m=cfg.reg_coupled_length_m,
                             r_m=cfg.reg_sigma_m, r_rad=cfg.reg_sigma_rad,
-                            full_overlap_frac=cfg.reg_full_overlap_frac)
+                            full_overlap_frac=cfg.reg_full_overlap_frac,
+                            q_rad2_per_rad=cfg.odom_turn_sigma_per_sqrt_rad**2)
         if cfg.reg_fusion == "filter" else None,
         calibration=CalibrationParams(segment_m=cfg.odom_calibration_segment_m)
         if cfg.odom_calibration else None,
