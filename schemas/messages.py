@@ -146,7 +146,8 @@ class Submap(Message):
         description="(4, 4) the agent's estimate of the submap frame in the world frame"
     )
     points_mm: Annotated[np.ndarray, ArraySpec("int16", (3, None), compress=True)] = Field(
-        description="(3, N) int16 voxel-centre coordinates in the submap frame, millimetres"
+        description="(3, N) int16 voxel means in the submap frame, millimetres (each "
+        "inside its voxel: `voxel_indices(points_mm / 1000, voxel_m)` gives the voxel)"
     )
     colors: Annotated[np.ndarray, ArraySpec("uint8", (None, 3), compress=True)] = Field(
         description="(N, 3) uint8 RGB per point"

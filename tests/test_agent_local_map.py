@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from services.common import voxels
 from services.common.geometry import T_from_xyyaw
 from services.robot_agent.config import AgentConfig
 from services.robot_agent.local_map import KeyframeMapper, VoxelSubmap, decode_points_m
@@ -16,19 +17,25 @@ def _cloud(n: int = 2000, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     return rng.uniform(-4, 4, (n, 3)), rng.integers(0, 256, (n, 3)).astype(np.uint8)
 
 
-def test_delta_round_trip_within_a_millimetre_of_voxel_centres() -> None:
+def test_delta_sends_voxel_means_on_the_step_grid_and_inside_their_voxel() -> None:
     pts, cols = _cloud()
+    pts[:2] = [[0.0499996, 1.0, 1.0], [0.0499996, 1.0, 1.0]]  # a mean that rounds onto a face
     sub = VoxelSubmap(0, np.eye(4), 0)
     sub.add_points(pts, cols, CFG.voxel_m)
-    delta = sub.take_delta(CFG.voxel_m, CFG.color_resend)
+    delta = sub.take_delta(CFG.voxel_m, CFG.color_resend, CFG.point_step_mm)
     assert delta is not None and delta.points_mm.dtype == np.int16
     assert delta.points_mm.shape == (3, len(sub))
     back = decode_points_m(delta.points_mm)
-    centres = (np.floor(pts / CFG.voxel_m) + 0.5) * CFG.voxel_m
-    uniq = np.unique(centres.round(6), axis=0)
-    assert back.shape == uniq.shape
-    # every decoded point is within 1 mm of a true voxel centre, and vice versa
-    np.testing.assert_allclose(np.sort(back, axis=0), np.sort(uniq, axis=0), atol=1e-3)
+    keys = voxels.pack(voxels.voxel_indices(pts, CFG.voxel_m))
+    uniq, inverse = np.unique(keys, return_inverse=True)
+    means = np.stack([np.bincount(inverse, weights=pts[:, d]) for d in range(3)], 1)
+    means /= np.bincount(inverse)[:, None]
+    assert back.shape == means.shape
+    # the receiver re-keys each point to its own voxel, each its voxel's mean within a step
+    back_keys = voxels.pack(voxels.voxel_indices(back, CFG.voxel_m))
+    np.testing.assert_array_equal(np.sort(back_keys), uniq)
+    order = np.argsort(back_keys)
+    np.testing.assert_allclose(back[order], means, atol=CFG.point_step_mm * 0.6e-3)
     assert int(delta.counts.sum()) == len(pts)
 
 

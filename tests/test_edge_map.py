@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from schemas.messages import Submap
-from services.common.geometry import T_from_xyyaw
+from services.common.geometry import T_from_xyyaw, transform_points
 from services.common.voxels import centres, unpack
 from services.edge_server.config import EdgeConfig
 from services.edge_server.merged_grid import FREE, OCCUPIED, UNKNOWN, MergedGrid
@@ -81,18 +81,25 @@ def test_merged_map_of_two_overlapping_submaps() -> None:
     assert len(merged) == 10 + 11 - 0  # robot 1 now starts at voxel 20
 
 
-def robot_cloud_from_parts(merged: MergedMap, robot: int) -> tuple[np.ndarray, np.ndarray]:
-    """The reference: every voxel of the robot's parts once, earliest tick first."""
-    parts = [p for (r, _), p in sorted(merged._parts.items()) if r == robot]
-    if not parts:
+def robot_cloud_from_parts(
+    merged: MergedMap, store: SubmapStore, robot: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The reference: every voxel of the robot's parts once, earliest tick first, at the
+    store's current mean point of that first observation, moved by its submap's pose."""
+    keyed = [(k, p) for k, p in sorted(merged._parts.items()) if k[0] == robot]
+    if not keyed:
         return np.zeros((0, 3)), np.zeros((0, 3), np.uint8)
+    parts = [p for _, p in keyed]
     keys = np.concatenate([p.keys_world for p in parts])
     ticks = np.concatenate([p.first_tick for p in parts])
+    points = np.concatenate([
+        transform_points(store.submaps[k].T_world_submap, store.submaps[k].points[: p.n])
+        for k, p in keyed])
     order = np.lexsort((ticks, keys))
     first = np.r_[True, keys[order][1:] != keys[order][:-1]]
     idx = order[first]
     colors = np.concatenate([p.colors for p in parts])[idx]
-    return centres(unpack(keys[idx]), V), colors
+    return points[idx], colors
 
 
 def test_robot_cloud_kept_up_to_date_equals_from_scratch() -> None:
@@ -108,8 +115,9 @@ def test_robot_cloud_kept_up_to_date_equals_from_scratch() -> None:
         for _ in range(3):  # deltas: overlapping voxels, one colour per message
             robot, sub = int(rng.integers(2)), int(rng.integers(3))
             idx = rng.integers(0, 12, (int(rng.integers(1, 15)), 3))
+            means = voxel_centres(idx) + rng.uniform(-0.02, 0.02, idx.shape)  # off-centre
             store.apply(make_submap(robot, sub, seq[robot], tick, poses[robot, sub],
-                                    voxel_centres(idx), color=int(rng.integers(256))))
+                                    means, color=int(rng.integers(256))))
             seq[robot] += 1
         if rng.random() < 0.15:  # a corrected pose
             key = next(iter(sorted(store.submaps)))
@@ -118,8 +126,8 @@ def test_robot_cloud_kept_up_to_date_equals_from_scratch() -> None:
         merged.update(store)
         if rng.random() < 0.6:  # the sampler does not query at every plan
             for robot in (0, 1):
-                got, want = merged.robot_cloud(robot), robot_cloud_from_parts(merged, robot)
-                np.testing.assert_array_equal(got[0], want[0])
+                got, want = merged.robot_cloud(robot), robot_cloud_from_parts(merged, store, robot)
+                np.testing.assert_allclose(got[0], want[0], atol=1e-6)
                 np.testing.assert_array_equal(got[1], want[1])
     assert rebuilds > 0 and len(merged.robot_cloud(0)[0]) > 100
 
@@ -145,3 +153,22 @@ def test_grid_from_free_cells_and_obstacles() -> None:
     assert at(2.0 - 0.3, 3.0) == UNKNOWN
     assert (snap.cells == FREE).sum() == 200 - 10
     assert spec.origin_x <= 1.5 and spec.origin_x + spec.width * V >= 3.5
+
+
+def test_merged_points_are_the_first_observers_latest_means() -> None:
+    """P*'s point of a voxel is its first observer's mean point as last sent (not the voxel
+    centre, which stair-steps surfaces); the keys, and so the grid, stay on the lattice."""
+    store, merged = SubmapStore(V), MergedMap(V)
+    store.apply(make_submap(0, 0, 0, 1, np.eye(4), np.array([[0.012, 0.013, 0.111]])))
+    store.apply(make_submap(1, 0, 0, 2, np.eye(4), np.array([[0.040, 0.040, 0.140]])))
+    merged.update(store)
+    np.testing.assert_allclose(merged.points_world, [[0.012, 0.013, 0.111]], atol=1e-6)
+    np.testing.assert_allclose(merged.centres_world, [[0.025, 0.025, 0.125]])
+    store.apply(make_submap(0, 0, 1, 3, np.eye(4), np.array([[0.020, 0.021, 0.120]])))
+    assert not merged.update(store)  # no new voxel ...
+    np.testing.assert_allclose(merged.points_world, [[0.020, 0.021, 0.120]], atol=1e-6)  # refined
+    np.testing.assert_allclose(merged.robot_cloud(1)[0], [[0.040, 0.040, 0.140]], atol=1e-6)
+    store.set_pose((0, 0), T_from_xyyaw(1.0, 0.0, 0.0))  # moved: the point moves with it
+    merged.update(store)
+    np.testing.assert_allclose(merged.points_world, [[0.04, 0.04, 0.14], [1.02, 0.021, 0.12]],
+                               atol=1e-6)

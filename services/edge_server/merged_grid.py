@@ -137,7 +137,7 @@ class MergedGrid:
                 new_rc = world_cells(self._band_xy(centres(unpack(added), merged.voxel_m)), res)
                 rc = unique_rows_2(np.concatenate([self._obstacle_rc[1], new_rc]))
             else:
-                rc = world_cells(self._band_xy(merged.points_world), res)
+                rc = world_cells(self._band_xy(merged.centres_world), res)
             self._obstacle_rc = (merged.version, rc)
         obstacle_rc = self._obstacle_rc[1]
         if self.config.grid_bounds_m is None:

@@ -1,8 +1,11 @@
 """The merged cloud P*: every submap's voxels placed in the world by its pose, re-voxelized.
 
 Each submap's voxel centres are transformed to the world and re-keyed at `voxel_m`; a world
-voxel keeps the colour and robot of its earliest observation (smallest first tick, then robot
-id), so the result does not depend on the order submaps are stored in. Updates are incremental
+voxel keeps the colour, robot and point of its earliest observation (smallest first tick, then
+robot id), so the result does not depend on the order submaps are stored in. Its point is that
+observation's mean point (the agent's latest, moved with its submap's pose): on the surface,
+where the world voxel's centre would stair-step it by up to half a voxel; the keys, and so the
+grid and the frontiers, come from the centres. Updates are incremental
 while no pose changes: only voxels appended since the last update are transformed and merged
 (they arrived later, so they never displace an existing voxel's first observer). A pose change
 rebuilds that submap's world keys and the merged set.
@@ -33,6 +36,9 @@ class _WorldPart:
     keys_world: np.ndarray
     colors: np.ndarray
     first_tick: np.ndarray
+    uid: int = 0  # the submap's number in this map: a voxel's source is (uid, index)
+    points_world: np.ndarray | None = None  # (n, 3) float32 mean points, for `points_stamp`
+    points_stamp: tuple[int, int, int] = (-1, -1, -1)  # (submap version, pose version, n)
 
 
 def _to_world_keys(sm: StoredSubmap, start: int, voxel_m: float) -> np.ndarray:
@@ -53,13 +59,16 @@ def _first_observed(
 
 @dataclass
 class _RobotMap:
-    """One robot's own map (sorted unique world keys, colours) and, per part it was built
-    from, (pose_version, voxels taken)."""
+    """One robot's own map (sorted unique world keys, colours, source (uid, index) of each
+    voxel's point) and, per part it was built from, (pose_version, voxels taken)."""
 
     taken: dict[SubmapKey, tuple[int, int]]
     keys: np.ndarray
     colors: np.ndarray
+    src_uid: np.ndarray
+    src_idx: np.ndarray
     points: np.ndarray | None = None
+    points_stamp: int = -1
 
 
 def _insert_new(
@@ -85,7 +94,12 @@ class MergedMap:
         self.keys = np.zeros(0, np.int64)
         self.colors = np.zeros((0, 3), np.uint8)
         self.robot_ids = np.zeros(0, np.uint8)
+        self.src_uid = np.zeros(0, np.int32)  # each voxel's point: part uid and index in it
+        self.src_idx = np.zeros(0, np.int32)
+        self._uids: dict[SubmapKey, int] = {}
+        self._centres: np.ndarray | None = None
         self._points: np.ndarray | None = None
+        self._points_version = 0  # bumps when a part's mean points are taken again
         self._store_version = -1
         self.version = 0  # bumps whenever the merged set changes
         # keys the last update inserted; None after a rebuild (voxels may have been removed)
@@ -99,23 +113,28 @@ class MergedMap:
             return False
         self._store_version = store.version
         rebuild = False
-        deltas: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        deltas: list[tuple[np.ndarray, ...]] = []
         for sm in store.ordered():
             part = self._parts.get(sm.key)
             if part is None or part.pose_version != sm.pose_version:
                 rebuild |= part is not None
+                uid = self._uids.setdefault(sm.key, len(self._uids))
                 part = _WorldPart(sm.pose_version, 0, np.zeros(0, np.int64),
-                                  np.zeros((0, 3), np.uint8), np.zeros(0, np.int64))
+                                  np.zeros((0, 3), np.uint8), np.zeros(0, np.int64), uid)
                 self._parts[sm.key] = part
             if sm.keys.size > part.n:
                 new_keys = _to_world_keys(sm, part.n, self.voxel_m)
                 new_colors, new_ticks = sm.colors[part.n :], sm.first_tick[part.n :]
                 robots = np.full(new_keys.size, sm.robot_id, np.uint8)
-                deltas.append((new_keys, new_colors, new_ticks, robots))
+                uids = np.full(new_keys.size, part.uid, np.int32)
+                idx = np.arange(part.n, sm.keys.size, dtype=np.int32)
+                deltas.append((new_keys, new_colors, new_ticks, robots, uids, idx))
                 part.keys_world = np.concatenate([part.keys_world, new_keys])
                 part.colors = np.concatenate([part.colors, new_colors])
                 part.first_tick = np.concatenate([part.first_tick, new_ticks])
                 part.n = sm.keys.size
+        if self._snapshot_points(store):
+            self._points = None
         if rebuild:
             self._rebuild(store)
             self.added_keys = None
@@ -123,9 +142,26 @@ class MergedMap:
             self._merge_delta(*(np.concatenate(parts) for parts in zip(*deltas, strict=True)))
         else:
             return False
-        self._points = None
+        self._centres = self._points = None
         self.version += 1
         return True
+
+    def _snapshot_points(self, store: SubmapStore) -> bool:
+        """Take the world mean points of every part whose submap changed: here, at the
+        update, so that the points, like the keys, are those of the messages the update saw
+        (later deltas refine a submap's points in place). True when any was taken."""
+        taken = False
+        for sm in store.ordered():
+            part = self._parts[sm.key]
+            stamp = (sm.version, sm.pose_version, part.n)
+            if part.points_stamp != stamp:
+                part.points_world = transform_points(
+                    sm.T_world_submap, sm.points[: part.n].astype(np.float64)
+                ).astype(np.float32)
+                part.points_stamp = stamp
+                taken = True
+        self._points_version += taken
+        return taken
 
     def _rebuild(self, store: SubmapStore) -> None:
         sms = store.ordered()
@@ -137,30 +173,60 @@ class MergedMap:
             np.full(p.keys_world.size, sm.robot_id, np.uint8)
             for sm, p in zip(sms, parts, strict=True)
         ])
+        uids, src = _sources(parts)
         self.keys, idx = _first_observed(keys, ticks, robots)
         self.colors, self.robot_ids = colors[idx], robots[idx]
+        self.src_uid, self.src_idx = uids[idx], src[idx]
 
     def _merge_delta(
-        self, keys: np.ndarray, colors: np.ndarray, ticks: np.ndarray, robots: np.ndarray
+        self, keys: np.ndarray, colors: np.ndarray, ticks: np.ndarray, robots: np.ndarray,
+        uids: np.ndarray, src: np.ndarray,
     ) -> None:
         keys, idx = _first_observed(keys, ticks, robots)
-        self.keys, (self.colors, self.robot_ids), self.added_keys = _insert_new(
-            self.keys, [self.colors, self.robot_ids], keys, [colors[idx], robots[idx]])
+        values = [self.colors, self.robot_ids, self.src_uid, self.src_idx]
+        self.keys, values, self.added_keys = _insert_new(
+            self.keys, values, keys, [colors[idx], robots[idx], uids[idx], src[idx]])
+        self.colors, self.robot_ids, self.src_uid, self.src_idx = values
 
     # -- read ------------------------------------------------------------------------------
     @property
+    def centres_world(self) -> np.ndarray:
+        """(N, 3) float64 voxel centres of P* in the world frame (what the grid is built on)."""
+        if self._centres is None:
+            self._centres = centres(unpack(self.keys), self.voxel_m)
+        return self._centres
+
+    @property
     def points_world(self) -> np.ndarray:
-        """(N, 3) float64 voxel centres of P* in the world frame."""
+        """(N, 3) float32 points of P* in the world frame: each voxel's first observation's
+        mean point, as of the last update (later deltas of a submap refine its points)."""
         if self._points is None:
-            self._points = centres(unpack(self.keys), self.voxel_m)
+            self._points = self._gather(self.src_uid, self.src_idx)
         return self._points
+
+    def _gather(self, src_uid: np.ndarray, src_idx: np.ndarray) -> np.ndarray:
+        """(N, 3) float32 world mean points of the voxels at (uid, index)."""
+        if src_uid.size == 0:
+            return np.zeros((0, 3), np.float32)
+        by_uid = {p.uid: p for p in self._parts.values()}
+        used = np.unique(src_uid)
+        offsets = np.zeros(int(used.max()) + 1, np.int64)
+        blocks, at = [], 0
+        for uid in used.tolist():
+            part = by_uid[uid]
+            assert part.points_world is not None  # taken by the update that added its voxels
+            blocks.append(part.points_world)
+            offsets[uid] = at
+            at += part.points_world.shape[0]
+        return np.concatenate(blocks)[offsets[src_uid] + src_idx]
 
     def __len__(self) -> int:
         return int(self.keys.size)
 
     def robot_cloud(self, robot_id: int) -> tuple[np.ndarray, np.ndarray]:
-        """One robot's own map: (N, 3) world voxel centres and (N, 3) colours of its submaps,
-        each voxel once with the colour of its earliest observation; as of the last update."""
+        """One robot's own map: (N, 3) float32 world points and (N, 3) colours of its submaps,
+        each voxel once with the mean point and colour of its earliest observation; the
+        voxels as of the last update."""
         parts = {k: p for k, p in self._parts.items() if k[0] == robot_id}
         cached = self._robot_maps.get(robot_id)
         if cached is None or any(k in cached.taken and cached.taken[k][0] != p.pose_version
@@ -169,37 +235,58 @@ class MergedMap:
         else:
             _extend(cached, parts)
         self._robot_maps[robot_id] = cached
-        if cached.points is None:
-            cached.points = centres(unpack(cached.keys), self.voxel_m)
+        if cached.points is None or cached.points_stamp != self._points_version:
+            cached.points = self._gather(cached.src_uid, cached.src_idx)
+            cached.points_stamp = self._points_version
         return cached.points, cached.colors
+
+    def robot_centres(self, robot_id: int) -> np.ndarray:
+        """(N, 3) float64 world voxel centres of `robot_cloud(robot_id)`, in its order."""
+        self.robot_cloud(robot_id)
+        return centres(unpack(self._robot_maps[robot_id].keys), self.voxel_m)
+
+
+def _sources(parts: list[_WorldPart]) -> tuple[np.ndarray, np.ndarray]:
+    """(uid, index) of every voxel of `parts`, concatenated in their order."""
+    if not parts:
+        return np.zeros(0, np.int32), np.zeros(0, np.int32)
+    uids = np.concatenate([np.full(p.keys_world.size, p.uid, np.int32) for p in parts])
+    idx = np.concatenate([np.arange(p.keys_world.size, dtype=np.int32) for p in parts])
+    return uids, idx
 
 
 def _robot_map(parts: dict[SubmapKey, _WorldPart]) -> _RobotMap:
     """A robot's own map from all of its parts."""
     ordered = [parts[k] for k in sorted(parts)]
     taken = {k: (p.pose_version, p.keys_world.size) for k, p in parts.items()}
+    uids, src = _sources(ordered)
     if not ordered:
-        return _RobotMap(taken, np.zeros(0, np.int64), np.zeros((0, 3), np.uint8))
+        return _RobotMap(taken, np.zeros(0, np.int64), np.zeros((0, 3), np.uint8), uids, src)
     keys = np.concatenate([p.keys_world for p in ordered])
     ticks = np.concatenate([p.first_tick for p in ordered])
     uniq, idx = _first_observed(keys, ticks, np.zeros(keys.size, np.uint8))
-    return _RobotMap(taken, uniq, np.concatenate([p.colors for p in ordered])[idx])
+    colors = np.concatenate([p.colors for p in ordered])[idx]
+    return _RobotMap(taken, uniq, colors, uids[idx], src[idx])
 
 
 def _extend(cached: _RobotMap, parts: dict[SubmapKey, _WorldPart]) -> None:
     """Add the voxels the robot's unmoved parts appended since `cached` was built. They
     arrived in later plans, so later ticks: a voxel already held keeps its first observer."""
-    new: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    new: list[tuple[np.ndarray, ...]] = []
     for k in sorted(parts):
         p = parts[k]
         start = cached.taken.get(k, (p.pose_version, 0))[1]
         if p.keys_world.size > start:
-            new.append((p.keys_world[start:], p.first_tick[start:], p.colors[start:]))
+            n = p.keys_world.size - start
+            new.append((p.keys_world[start:], p.first_tick[start:], p.colors[start:],
+                        np.full(n, p.uid, np.int32), np.arange(start, start + n, dtype=np.int32)))
         cached.taken[k] = (p.pose_version, p.keys_world.size)
     if not new:
         return
-    keys, ticks, colors = (np.concatenate(arrays) for arrays in zip(*new, strict=True))
+    keys, ticks, colors, uids, src = (np.concatenate(a) for a in zip(*new, strict=True))
     keys, idx = _first_observed(keys, ticks, np.zeros(keys.size, np.uint8))
-    cached.keys, (cached.colors,), _ = _insert_new(cached.keys, [cached.colors], keys,
-                                                   [colors[idx]])
+    cached.keys, values, _ = _insert_new(
+        cached.keys, [cached.colors, cached.src_uid, cached.src_idx], keys,
+        [colors[idx], uids[idx], src[idx]])
+    cached.colors, cached.src_uid, cached.src_idx = values
     cached.points = None

@@ -28,7 +28,6 @@ from services.common.registration import (
     register,
     world_box,
 )
-from services.common.voxels import centres, unpack
 from services.edge_server.consistency import ConsistencyParams, select
 from services.edge_server.submap_store import StoredSubmap, SubmapKey, SubmapStore
 
@@ -96,7 +95,7 @@ class MapMerger:
     def _cached(self, sm: StoredSubmap) -> tuple[int, np.ndarray, np.ndarray]:
         cached = self._points.get(sm.key)
         if cached is None or cached[0] != sm.keys.size:
-            points = centres(unpack(sm.keys), self.voxel_m)
+            points = sm.points.astype(np.float64)  # the agents' voxel means
             cached = (sm.keys.size, points, np.stack([points.min(axis=0), points.max(axis=0)]))
             self._points[sm.key] = cached
         return cached

@@ -26,7 +26,7 @@ class _StoreView:
 
 @dataclass(frozen=True)
 class _CloudView:
-    points_world: np.ndarray
+    centres_world: np.ndarray
     version: int
 
 
@@ -38,8 +38,7 @@ def robot_grid(
         return None
     config = grid.config.model_copy(update={"grid_bounds_m": grid.bounds})
     view = _StoreView([sm for sm in store.ordered() if sm.robot_id == robot_id])
-    points, _ = merged.robot_cloud(robot_id)
-    snap = MergedGrid(config).update(view, _CloudView(points, 0))  # type: ignore[arg-type]
+    snap = MergedGrid(config).update(view, _CloudView(merged.robot_centres(robot_id), 0))  # type: ignore[arg-type]
     if snap is None:
         return None
     s = snap.spec

@@ -1,8 +1,9 @@
 """The edge's copy of every robot's submaps, built from `Submap` deltas.
 
 A submap is keyed by (robot_id, submap_id). Its voxels are kept in the submap frame as packed
-voxel keys (services.common.voxels) with colour, observation count and the tick each voxel was
-first received (the merged map uses it to name a voxel's first observer). New voxels are only
+voxel keys (services.common.voxels) with the agent's latest mean point, colour, observation
+count and the tick each voxel was first received (the merged map uses it to name a voxel's
+first observer). New voxels are only
 ever appended, so consumers can cache by length. `version` bumps on new data and
 `pose_version` when the pose changes, so the merged map and grid know what to recompute.
 
@@ -39,6 +40,7 @@ class StoredSubmap:
     T_world_submap: np.ndarray
     cell_m: float
     keys: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.float32))
     colors: np.ndarray = field(default_factory=lambda: np.zeros((0, 3), np.uint8))
     counts: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint16))
     first_tick: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -55,21 +57,25 @@ class StoredSubmap:
 
 
 def _upsert(
-    sm: StoredSubmap, keys: np.ndarray, colors: np.ndarray, counts: np.ndarray, tick: int
+    sm: StoredSubmap, keys: np.ndarray, points: np.ndarray, colors: np.ndarray,
+    counts: np.ndarray, tick: int,
 ) -> None:
-    """Insert new voxels, refresh colour and count of known ones; new voxels go to the end."""
+    """Insert new voxels, refresh mean point, colour and count of known ones; new voxels go
+    to the end."""
     keys, first = unique_first(keys)
-    colors, counts = colors[first], counts[first]
+    points, colors, counts = points[first], colors[first], counts[first]
     known = np.zeros(keys.size, bool)
     if sm.keys.size:
         order = np.argsort(sm.keys, kind="stable")
         pos = np.minimum(np.searchsorted(sm.keys[order], keys), sm.keys.size - 1)
         known = sm.keys[order[pos]] == keys
         idx = order[pos[known]]
+        sm.points[idx] = points[known]
         sm.colors[idx] = colors[known]
         sm.counts[idx] = counts[known]
     new = ~known
     sm.keys = np.concatenate([sm.keys, keys[new]])
+    sm.points = np.concatenate([sm.points, points[new]])
     sm.colors = np.concatenate([sm.colors, colors[new]])
     sm.counts = np.concatenate([sm.counts, counts[new]])
     sm.first_tick = np.concatenate([sm.first_tick, np.full(int(new.sum()), tick, np.int64)])
@@ -101,7 +107,8 @@ class SubmapStore:
         points_submap = msg.points_mm.T.astype(np.float64) / 1000.0  # mm → m, (N, 3)
         if points_submap.shape[0]:
             keys = pack(voxel_indices(points_submap, self.voxel_m))
-            _upsert(sm, keys, msg.colors, msg.counts, msg.tick)
+            _upsert(sm, keys, points_submap.astype(np.float32), msg.colors, msg.counts,
+                    msg.tick)
         if msg.free_cells.shape[1]:
             cells = np.concatenate([sm.free_cells, msg.free_cells.T.astype(np.int64)])
             sm.free_cells = unique_rows_2(cells)

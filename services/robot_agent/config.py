@@ -149,6 +149,10 @@ class AgentConfig(BaseModel):
     color_resend: int = Field(
         default=24, ge=0, description="resend a voxel when its mean colour moves this much"
     )
+    # 1 mm steps made the submap traffic 2.3x that of voxel centres (zstd); 5 mm, 1.4 mm RMS
+    point_step_mm: int = Field(
+        default=5, ge=2, description="a voxel's mean point is sent on this grid inside it"
+    )
     # -- local 2D grid ---------------------------------------------------------------------
     cell_m: float = Field(default=0.05, gt=0, description="2D grid and free-cell size")
     grid_half_size_m: float = Field(default=25.0, gt=0, description="local grid ± around spawn")

@@ -1,10 +1,12 @@
 """Keyframe submaps: a 5 cm voxel map per keyframe, published as quantized deltas.
 
 A submap's points live in the `submap` frame, the robot base pose when the keyframe started,
-so the edge can move a whole submap when its pose is corrected. Each voxel keeps its mean colour
-and observation count; a voxel is (re)sent when it is new, when its count reaches the next power
-of two, or when its mean colour moves by `color_resend`: the edge gets counts within 2× and
-colours within that bound, at a fraction of the traffic of resending every seen voxel.
+so the edge can move a whole submap when its pose is corrected. Each voxel keeps its mean point,
+mean colour and observation count, and is sent as its mean point (on the surface, where the
+voxel centre would stair-step it by up to half a voxel). A voxel is (re)sent when it is new,
+when its count reaches the next power of two, or when its mean colour moves by `color_resend`:
+the edge gets counts within 2× and colours within that bound, at a fraction of the traffic of
+resending every seen voxel.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ class SubmapDelta:
 
     submap_id: int
     T_odom_submap: np.ndarray  # (4, 4) keyframe pose in the odometry frame
-    points_mm: np.ndarray  # (3, N) int16 voxel centres, submap frame, mm
+    points_mm: np.ndarray  # (3, N) int16 voxel means (inside their voxel), submap frame, mm
     colors: np.ndarray  # (N, 3) uint8
     counts: np.ndarray  # (N,) uint16
     free_cells: np.ndarray  # (2, M) int16 (x, y) cells in the submap frame
@@ -40,6 +42,19 @@ def _bit_length(values: np.ndarray) -> np.ndarray:
     pos = values > 0
     out[pos] = np.floor(np.log2(values[pos])).astype(np.int64) + 1
     return out
+
+
+def _voxel_means_mm(
+    keys: np.ndarray, means_m: np.ndarray, voxel_m: float, step_mm: int
+) -> np.ndarray:
+    """(3, N) int16 voxel means in mm on a `step_mm` grid inside each voxel, at least 1 mm
+    from its faces so that the receiver's `voxel_indices` gives back the same keys."""
+    voxel_mm = round(voxel_m * 1000.0)
+    if abs(voxel_m * 1000.0 - voxel_mm) > 1e-6 or voxel_mm < 2 * step_mm:
+        raise ValueError(f"voxel_m must be whole millimetres ≥ 2 steps, got {voxel_m}")
+    lo_mm = voxels.unpack(keys) * voxel_mm
+    steps = np.clip(np.floor((means_m * 1000.0 - lo_mm) / step_mm), 0, voxel_mm // step_mm - 1)
+    return (lo_mm + steps * step_mm + step_mm // 2).astype(np.int16).T.copy()
 
 
 class VoxelSubmap:
@@ -151,7 +166,9 @@ class VoxelSubmap:
         cells = self.free_cells()
         self.pending_free = [cells] if cells.size else []
 
-    def take_delta(self, voxel_m: float, color_resend: int) -> SubmapDelta | None:
+    def take_delta(
+        self, voxel_m: float, color_resend: int, step_mm: int = 5
+    ) -> SubmapDelta | None:
         """The changed voxels and new free cells since the last call, marked as sent."""
         colors = self.mean_colors()
         dirty = (self.sent_counts == 0) & (self.counts > 0)
@@ -164,13 +181,14 @@ class VoxelSubmap:
         self.pose_dirty = False
         self.sent_counts[dirty] = self.counts[dirty]
         self.sent_colors[dirty] = colors[dirty]
-        centres = voxels.centres(voxels.unpack(self.keys[dirty]), voxel_m)
+        points_mm = _voxel_means_mm(self.keys[dirty], self.mean_points()[dirty], voxel_m,
+                                    step_mm)
         free = np.concatenate([np.empty((2, 0), np.int64), *self.pending_free], axis=1)
         self.pending_free = []
         return SubmapDelta(
             submap_id=self.submap_id,
             T_odom_submap=self.pose().copy(),
-            points_mm=np.round(centres * 1000.0).astype(np.int16).T.copy(),
+            points_mm=points_mm,
             colors=colors[dirty].astype(np.uint8),
             counts=np.minimum(self.counts[dirty], np.iinfo(np.uint16).max).astype(np.uint16),
             free_cells=np.ascontiguousarray(free.astype(np.int16)),
@@ -220,7 +238,8 @@ class KeyframeMapper:
     def take_delta(self) -> SubmapDelta | None:
         if self.current is None:
             return None
-        return self.current.take_delta(self.config.voxel_m, self.config.color_resend)
+        return self.current.take_delta(self.config.voxel_m, self.config.color_resend,
+                                       self.config.point_step_mm)
 
     def submaps(self) -> list[VoxelSubmap]:
         """Every submap, oldest first, the open one last."""
@@ -245,7 +264,8 @@ class KeyframeMapper:
         out = []
         for sub in self.done:
             if sub.pose_dirty:
-                delta = sub.take_delta(self.config.voxel_m, self.config.color_resend)
+                delta = sub.take_delta(self.config.voxel_m, self.config.color_resend,
+                                       self.config.point_step_mm)
                 out += [delta] if delta is not None else []
         return out
 
@@ -259,7 +279,8 @@ class KeyframeMapper:
         out = []
         for sub in [*self.done, *([self.current] if self.current is not None else [])]:
             sub.mark_unsent()
-            delta = sub.take_delta(self.config.voxel_m, self.config.color_resend)
+            delta = sub.take_delta(self.config.voxel_m, self.config.color_resend,
+                                       self.config.point_step_mm)
             out += [delta] if delta is not None else []
         return out
 
