@@ -193,6 +193,11 @@ class Goal(Message):
     look_xy: tuple[float, float] | None = Field(
         default=None, description="world (x, y), m, the robot faces on arrival before it reports "
         "reached (the frontier region's centroid); None: report on arrival")
+    queued: bool = Field(
+        default=False, description="a successor: the robot keeps it and adopts it as soon as "
+        "its current goal ends (reached, invalid, unreachable), instead of idling until the "
+        "next plan; a later queued goal, or any new goal, replaces it; with `cancel`, "
+        "withdraws it")
 
 
 GoalState = Literal["active", "reached", "invalid", "unreachable"]

@@ -46,6 +46,24 @@ def test_each_goal_gets_one_outcome() -> None:
         (3, "cancelled", 130, 150), (4, "unreachable", 170, 200), (5, "open", 210, 300)]
 
 
+def test_a_queued_goal_starts_when_the_agent_adopts_it() -> None:
+    queued = {"queued": True}
+    events = [
+        _goal(10, 0), _status(11, 0, "active"),
+        {**_goal(30, 1), **queued}, {**_goal(40, 2, "weak"), **queued},  # 2 replaces 1
+        _status(50, 0, "reached"), _status(51, 2, "active"),
+        {**_goal(60, 3), **queued}, {**_goal(70, 3, cancel=True), **queued},  # withdrawn
+        _status(90, 2, "reached"),
+        {**_goal(95, 4), **queued}, _goal(100, 5),  # a new goal clears the successor
+        _status(101, 5, "active"), _status(120, 5, "reached"), _status(121, 4, "active"),
+    ]
+    spans = goal_spans(events, end_tick=200)
+    assert [(s.goal_id, s.frontier_class, s.outcome, s.start_tick, s.end_tick)
+            for s in spans] == [
+        (0, "unexplored", "reached", 10, 50), (2, "weak", "reached", 51, 90),
+        (5, "unexplored", "reached", 100, 120)]
+
+
 def test_time_and_distance_split_by_outcome() -> None:
     # 1 m/s along x for 30 s, sampled every tick
     stamps = np.arange(0, 301) * TICK_S

@@ -70,6 +70,9 @@ class EdgeConfig(BaseModel):
         "shelves one side is not enough); 0: space_reached_final alone")
     space_look_at_region: bool = Field(default=False, description="goals carry the region's "
                                        "centroid: the robot faces it before reporting reached")
+    space_successor_m: float = Field(
+        default=0.0, ge=0, description="a robot this close to its goal (m, straight line) "
+        "gets its next goal ahead (Goal.queued, successors.py); 0: it waits for the next plan")
     nav_v_mps: float = Field(default=0.5, gt=0, description="the agents' max_v_mps (the "
                              "mission config copies it)")
     nav_omega_radps: float = Field(default=0.7853981633974483, gt=0,

@@ -9,7 +9,9 @@ immediate second trip); a reached F_w spot for `weak_visited_ticks` (it has been
 from close by; a weak region that stays weak is not improved by a second visit). The
 `blacklist_strikes`-th report at one place sets it aside for good, so a frontier that no robot
 can clear stops holding completion back. A robot whose
-frontier vanished and that gets no other goal receives a cancel for its old goal.
+frontier vanished and that gets no other goal receives a cancel for its old goal. With
+`space_successor_m`, a robot about to reach its goal also gets its next one ahead
+(successors.py, `Goal.queued`); it becomes the robot's goal when the agent reports it active.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from services.edge_server.config import EdgeConfig
 from services.edge_server.coordination import RobotStates
 from services.edge_server.frontiers import FrontierSet
 from services.edge_server.robot_fields import RobotFields
+from services.edge_server.successors import successor_frontiers
 
 log = logging.getLogger(__name__)
 
@@ -59,12 +62,20 @@ class GoalBook:
         self.blacklist: list[tuple[float, float, int]] = []  # (x, y, expiry tick)
         self.strikes: list[tuple[float, float]] = []  # every bad/reached report's place
         self.looked_from: list[tuple[float, float]] = []  # reached places (space_second_look_m)
+        self.successors: dict[int, ActiveGoal] = {}  # robot → queued goal last sent
         self.next_goal_id = 0
 
     # -- agent reports ---------------------------------------------------------------------
     def on_status(self, status: GoalStatus) -> None:
         issued = self.issued.get(status.goal_id)
-        if status.status == "active" or issued is None:
+        if status.status == "active":
+            queued = self.successors.get(status.robot_id)
+            # adopted; unless a plan gave the robot a goal since (that one replaces it)
+            if queued is not None and queued.goal_id == status.goal_id:
+                del self.successors[status.robot_id]
+                self.active.setdefault(status.robot_id, queued)
+            return
+        if issued is None:
             return
         x, y, weak = issued
         ticks = self.config.blacklist_ticks
@@ -177,26 +188,67 @@ class GoalBook:
         assigned = dict(kept)
         for i, f in scorer.match(scores).items():
             assigned[robots[i]] = f
-            new_goals.append(self._issue(robots[i], f, tick, frontiers, float(scores[i, f])))
+            goal, self.active[robots[i]] = self._goal(robots[i], f, tick, frontiers,
+                                                      float(scores[i, f]))
+            self.successors.pop(robots[i], None)  # a new goal clears the agent's queued one
+            new_goals.append(goal)
         for robot, old in dropped.items():  # frontier gone and nothing else: withdraw the goal
             if robot not in assigned and robot in robots:
                 new_goals.append(Goal(robot_id=robot, tick=tick, goal_id=old.goal_id,
                                       x=old.goal_xy[0], y=old.goal_xy[1], revenue=0.0,
                                       frontier_class="weak" if old.weak else "unexplored",
                                       cancel=True))
+        if self.config.planner == "space" and self.config.space_successor_m > 0:
+            new_goals += self._successors(tick, robots, fields, frontiers, spec, scorer, poses,
+                                          usable, assigned)
         return Assignment(dict(sorted(assigned.items())), new_goals, int(usable.sum()))
 
-    def _issue(self, robot: int, f: int, tick: int, frontiers: FrontierSet, score: float) -> Goal:
+    def _successors(
+        self, tick: int, robots: list[int], fields: RobotFields, frontiers: FrontierSet,
+        spec: GridSpec, scorer: Scorer, poses: np.ndarray, usable: np.ndarray,
+        assigned: dict[int, int],
+    ) -> list[Goal]:
+        """Queued goals for robots within `space_successor_m` of their goal (new or moved
+        ones only), and withdrawals of those that no longer have one."""
+        xy = {r: poses[i, :2] for i, r in enumerate(robots)}
+        r2 = self.config.space_successor_m**2
+        near = {r: f for r, f in assigned.items() if r in xy
+                and ((xy[r] - np.array(self.active[r].goal_xy)) ** 2).sum() <= r2}
+        free = usable.copy()
+        free[list(assigned.values())] = False
+        chosen = successor_frontiers(near, frontiers, fields.traversable, spec.resolution_m, xy,
+                                     free, scorer, self.config.start_snap_m / spec.resolution_m)
+        out = []
+        for robot in sorted(near):
+            old = self.successors.get(robot)
+            f = chosen.get(robot)
+            if f is None:
+                if old is not None:
+                    del self.successors[robot]
+                    out.append(Goal(robot_id=robot, tick=tick, goal_id=old.goal_id,
+                                    x=old.goal_xy[0], y=old.goal_xy[1], revenue=0.0,
+                                    frontier_class="unexplored", cancel=True, queued=True))
+                continue
+            goal_xy = tuple(frontiers.goal_xy[f])
+            if old is not None and np.allclose(old.goal_xy, goal_xy):
+                continue  # the agent holds it already
+            goal, self.successors[robot] = self._goal(robot, f, tick, frontiers, 0.0)
+            out.append(goal.model_copy(update={"queued": True}))
+        return out
+
+    def _goal(self, robot: int, f: int, tick: int, frontiers: FrontierSet, score: float
+              ) -> tuple[Goal, ActiveGoal]:
+        """A new goal at frontier `f` (recorded as issued) and its bookkeeping entry."""
         goal_xy = (float(frontiers.goal_xy[f, 0]), float(frontiers.goal_xy[f, 1]))
         goal_id = self.next_goal_id
         self.next_goal_id += 1
         weak = bool(frontiers.weak[f]) if frontiers.weak is not None else False
         self.issued[goal_id] = (goal_xy[0], goal_xy[1], weak)
         anchor_xy = (float(frontiers.anchor_xy[f, 0]), float(frontiers.anchor_xy[f, 1]))
-        self.active[robot] = ActiveGoal(goal_id, goal_xy, anchor_xy, score, weak)
         look = None
         if self.config.planner == "space" and self.config.space_look_at_region:
             look = (float(frontiers.centroid_xy[f, 0]), float(frontiers.centroid_xy[f, 1]))
-        return Goal(robot_id=robot, tick=tick, goal_id=goal_id, x=goal_xy[0], y=goal_xy[1],
+        goal = Goal(robot_id=robot, tick=tick, goal_id=goal_id, x=goal_xy[0], y=goal_xy[1],
                     frontier_class="weak" if weak else "unexplored", revenue=score,
                     look_xy=look)
+        return goal, ActiveGoal(goal_id, goal_xy, anchor_xy, score, weak)

@@ -54,11 +54,25 @@ class RobotExplain:
 
 
 def goal_spans(events: Sequence[dict[str, Any]], end_tick: int) -> list[Span]:
-    """Every goal of one robot's tick-ordered events, with its outcome and end tick."""
+    """Every goal of one robot's tick-ordered events, with its outcome and end tick. A
+    queued goal (a successor) starts when the agent reports it active."""
     spans: list[Span] = []
     current: Span | None = None
+    queued: dict[int, str] = {}  # successor goal id → frontier class
     for ev in events:
         tick = int(ev["tick"])
+        if ev["kind"] == "goal" and ev.get("queued"):
+            if ev.get("cancel"):
+                queued.pop(int(ev["goal_id"]), None)
+            else:
+                queued = {int(ev["goal_id"]): str(ev.get("frontier_class", ""))}
+            continue
+        if ev["kind"] == "status" and ev["status"] == "active" and ev["goal_id"] in queued:
+            if current is not None:
+                current.end_tick, current.outcome = tick, "replaced"
+            current = Span(int(ev["goal_id"]), queued.pop(int(ev["goal_id"])), tick)
+            spans.append(current)
+            continue
         if ev["kind"] == "goal":
             if ev.get("cancel"):
                 if current is not None and current.goal_id == ev["goal_id"]:
@@ -66,6 +80,7 @@ def goal_spans(events: Sequence[dict[str, Any]], end_tick: int) -> list[Span]:
                 continue
             if current is not None and current.goal_id == ev["goal_id"]:
                 continue  # the same goal re-sent
+            queued = {}  # a new goal replaces the agent's successor too
             if current is not None:
                 current.end_tick, current.outcome = tick, "replaced"
             current = Span(int(ev["goal_id"]), str(ev.get("frontier_class", "")), tick)

@@ -219,10 +219,11 @@ class Monitor:
             t.state = msg.state
         elif isinstance(msg, m.Goal) and msg.robot_id in self.tracks:
             t = self.tracks[msg.robot_id]
-            t.goals_assigned += not msg.cancel
+            t.goals_assigned += not (msg.cancel or msg.queued)
             t.events.append({"tick": msg.tick, "kind": "goal", "goal_id": msg.goal_id,
                              "x": msg.x, "y": msg.y, "frontier_class": msg.frontier_class,
-                             "revenue": msg.revenue, "cancel": msg.cancel})
+                             "revenue": msg.revenue, "cancel": msg.cancel,
+                             "queued": msg.queued})
         elif isinstance(msg, m.GoalStatus) and msg.robot_id in self.tracks:
             t = self.tracks[msg.robot_id]
             t.goal_statuses[msg.status] += 1

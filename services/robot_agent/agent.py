@@ -94,6 +94,7 @@ class AgentCore:
         self.team_size = team_size  # teammates (robots − 1) whose poses mapping waits for
         self.frame: RgbdFrame | None = None
         self.goal: Goal | None = None
+        self.queued: Goal | None = None  # the edge's successor, adopted when a goal ends
         self.cancels: list[int] = []
         self.epoch: int | None = None  # first tick this process handled
         self.T_world_loc = np.eye(4)
@@ -121,12 +122,18 @@ class AgentCore:
         self.frame = frame
 
     def on_goal(self, goal: Goal) -> None:
+        if goal.queued:
+            withdrawn = goal.cancel and self.queued is not None \
+                and self.queued.goal_id == goal.goal_id
+            self.queued = None if withdrawn else (self.queued if goal.cancel else goal)
+            return
         if goal.cancel:
             self.cancels.append(goal.goal_id)
             if self.goal is not None and self.goal.goal_id == goal.goal_id:
                 self.goal = None
             return
         self.goal = goal  # adopted on the next tick, so its status goes out in tick order
+        self.queued = None  # a successor of the goal it replaces; the edge sends anew
 
     def on_grid(self, grid: OccupancyGrid) -> None:
         self.edge_grid = grid
@@ -213,7 +220,14 @@ class AgentCore:
             # the yaw it lost in a first spin (0.1-0.5 deg) would rotate the whole map.
             cmd = Command(0.0, 0.0)
         events += [event] if event is not None else []
+        self._adopt_queued(events)
         return self._outputs(odom, pose_world, deltas, events, cmd)
+
+    def _adopt_queued(self, events: list[StatusEvent]) -> None:
+        """The edge's successor becomes the goal (next tick) when this tick ended the last."""
+        ended = any(ev.status in ("reached", "invalid", "unreachable") for ev in events)
+        if ended and self.queued is not None and self.goal is None and self.nav.goal is None:
+            self.goal, self.queued = self.queued.model_copy(update={"queued": False}), None
 
     def _T_world_front(self) -> np.ndarray:
         """World pose of the front end's frame: the edge's correction and the back end's."""
