@@ -64,6 +64,7 @@ def test_the_edge_takes_an_adopted_successor_as_the_robots_goal() -> None:
     assert 0 not in book.active
     book.on_status(GoalStatus(robot_id=0, tick=11, goal_id=2, status="active"))
     assert book.active[0].goal_id == 2 and 0 not in book.successors
+    assert book.provisional == {0}  # the next plan scores it with the rest
     # a successor reported after a plan gave the robot another goal does not displace it
     book.successors[0] = ActiveGoal(3, (5.0, 1.0), (5.0, 1.2), 0.0)
     book.active[0] = ActiveGoal(4, (0.0, 0.0), (0.0, 0.2), 1.0)

@@ -63,6 +63,7 @@ class GoalBook:
         self.strikes: list[tuple[float, float]] = []  # every bad/reached report's place
         self.looked_from: list[tuple[float, float]] = []  # reached places (space_second_look_m)
         self.successors: dict[int, ActiveGoal] = {}  # robot → queued goal last sent
+        self.provisional: set[int] = set()  # robots on an adopted successor, not yet re-scored
         self.next_goal_id = 0
 
     # -- agent reports ---------------------------------------------------------------------
@@ -73,7 +74,9 @@ class GoalBook:
             # adopted; unless a plan gave the robot a goal since (that one replaces it)
             if queued is not None and queued.goal_id == status.goal_id:
                 del self.successors[status.robot_id]
-                self.active.setdefault(status.robot_id, queued)
+                if status.robot_id not in self.active:
+                    self.active[status.robot_id] = queued
+                    self.provisional.add(status.robot_id)
             return
         if issued is None:
             return
@@ -170,6 +173,8 @@ class GoalBook:
         goal_rc = frontiers.goal_rc
         usable = self.allowed(frontiers, tick) & fields.reachable[goal_rc[:, 0], goal_rc[:, 1]]
         kept = self._kept(robots, fields, frontiers, spec, usable)
+        for robot in self.provisional:  # a successor was chosen ahead: score it with the rest
+            kept.pop(robot, None)
         # path lengths only for robots that need a goal (Dijkstra is the costly part of a plan)
         need = [r for r in robots if r not in kept] if usable.any() else []
         fields.compute(need)
@@ -188,6 +193,11 @@ class GoalBook:
         assigned = dict(kept)
         for i, f in scorer.match(scores).items():
             assigned[robots[i]] = f
+            old = dropped.get(robots[i])
+            if robots[i] in self.provisional and old is not None and np.hypot(
+                    *(frontiers.goal_xy[f] - old.goal_xy)) <= self.config.blacklist_radius_m:
+                self.active[robots[i]] = dropped.pop(robots[i])  # confirmed: no new message
+                continue
             goal, self.active[robots[i]] = self._goal(robots[i], f, tick, frontiers,
                                                       float(scores[i, f]))
             self.successors.pop(robots[i], None)  # a new goal clears the agent's queued one
@@ -198,6 +208,7 @@ class GoalBook:
                                       x=old.goal_xy[0], y=old.goal_xy[1], revenue=0.0,
                                       frontier_class="weak" if old.weak else "unexplored",
                                       cancel=True))
+        self.provisional.clear()
         if self.config.planner == "space" and self.config.space_successor_m > 0:
             new_goals += self._successors(tick, robots, fields, frontiers, spec, scorer, poses,
                                           usable, assigned)
