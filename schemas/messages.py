@@ -12,7 +12,7 @@ from __future__ import annotations
 from typing import Annotated, ClassVar, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from schemas.arrays import ArraySpec
 
@@ -146,9 +146,15 @@ class Submap(Message):
         description="(4, 4) the agent's estimate of the submap frame in the world frame"
     )
     points_mm: Annotated[np.ndarray, ArraySpec("int16", (3, None), compress=True)] = Field(
-        description="(3, N) int16 voxel means in the submap frame, millimetres (each "
-        "inside its voxel: `voxel_indices(points_mm / 1000, voxel_m)` gives the voxel)"
+        description="(3, N) int16 voxel-centre coordinates in the submap frame, millimetres"
     )
+    offsets: Annotated[np.ndarray, ArraySpec("uint8", (None,), compress=True)] = Field(
+        default_factory=lambda: np.zeros(0, np.uint8),
+        description="(N,) uint8 where in its voxel each voxel's mean point lies: cell (i, j, k) "
+        "of an L×L×L split of the voxel along x, y, z, coded (i·L + j)·L + k with L = "
+        "`offset_levels`; empty: no means (the centres stand for the points)")
+    offset_levels: Annotated[int, Field(ge=1, le=6)] = Field(
+        default=1, description="L, cells per voxel edge of `offsets`")
     colors: Annotated[np.ndarray, ArraySpec("uint8", (None, 3), compress=True)] = Field(
         description="(N, 3) uint8 RGB per point"
     )
@@ -159,6 +165,18 @@ class Submap(Message):
         description="(2, M) int16 floor cells seen free, in submap-frame grid cells (x, y)"
     )
     cell_m: Annotated[float, Field(gt=0)] = Field(description="size of a free cell, metres")
+
+    @model_validator(mode="after")
+    def _per_voxel_arrays_agree(self) -> Submap:
+        n = self.points_mm.shape[1]
+        if self.colors.shape[0] != n or self.counts.shape[0] != n:
+            raise ValueError(f"{n} points but {self.colors.shape[0]} colours and "
+                             f"{self.counts.shape[0]} counts")
+        if self.offsets.shape[0] not in (0, n):
+            raise ValueError(f"{n} points but {self.offsets.shape[0]} offsets")
+        if self.offsets.size and int(self.offsets.max()) >= self.offset_levels**3:
+            raise ValueError(f"offset code {int(self.offsets.max())} ≥ {self.offset_levels}³")
+        return self
 
 
 class Correction(Message):

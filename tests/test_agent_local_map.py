@@ -17,26 +17,32 @@ def _cloud(n: int = 2000, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     return rng.uniform(-4, 4, (n, 3)), rng.integers(0, 256, (n, 3)).astype(np.uint8)
 
 
-def test_delta_sends_voxel_means_on_the_step_grid_and_inside_their_voxel() -> None:
+def test_delta_sends_centres_and_where_each_mean_lies() -> None:
     pts, cols = _cloud()
-    pts[:2] = [[0.0499996, 1.0, 1.0], [0.0499996, 1.0, 1.0]]  # a mean that rounds onto a face
     sub = VoxelSubmap(0, np.eye(4), 0)
     sub.add_points(pts, cols, CFG.voxel_m)
-    delta = sub.take_delta(CFG.voxel_m, CFG.color_resend, CFG.point_step_mm)
+    delta = sub.take_delta(CFG.voxel_m, CFG.color_resend, CFG.mean_levels)
     assert delta is not None and delta.points_mm.dtype == np.int16
-    assert delta.points_mm.shape == (3, len(sub))
+    assert delta.points_mm.shape == (3, len(sub)) and delta.offsets.shape == (len(sub),)
     back = decode_points_m(delta.points_mm)
     keys = voxels.pack(voxels.voxel_indices(pts, CFG.voxel_m))
     uniq, inverse = np.unique(keys, return_inverse=True)
+    # the centres, within 1 mm, one per voxel
+    np.testing.assert_allclose(np.sort(back, axis=0),
+                               np.sort(voxels.centres(voxels.unpack(uniq), CFG.voxel_m), axis=0),
+                               atol=1e-3)
+    # the decoded means: each within half a cell of its voxel's mean
+    indices = voxels.voxel_indices(back, CFG.voxel_m)
+    decoded = voxels.offset_points(indices, delta.offsets, CFG.voxel_m, CFG.mean_levels)
     means = np.stack([np.bincount(inverse, weights=pts[:, d]) for d in range(3)], 1)
     means /= np.bincount(inverse)[:, None]
-    assert back.shape == means.shape
-    # the receiver re-keys each point to its own voxel, each its voxel's mean within a step
-    back_keys = voxels.pack(voxels.voxel_indices(back, CFG.voxel_m))
-    np.testing.assert_array_equal(np.sort(back_keys), uniq)
-    order = np.argsort(back_keys)
-    np.testing.assert_allclose(back[order], means, atol=CFG.point_step_mm * 0.6e-3)
+    order = np.argsort(voxels.pack(indices))
+    cell = CFG.voxel_m / CFG.mean_levels
+    assert np.abs(decoded[order] - means).max() <= cell / 2 + 1e-9
     assert int(delta.counts.sum()) == len(pts)
+    centres_only = VoxelSubmap(0, np.eye(4), 0)
+    centres_only.add_points(pts, cols, CFG.voxel_m)
+    assert centres_only.take_delta(CFG.voxel_m, CFG.color_resend, 1).offsets.size == 0
 
 
 def test_only_new_or_changed_voxels_are_resent() -> None:

@@ -29,6 +29,7 @@ def _samples() -> list[m.Message]:
             colors=rng.integers(0, 255, (50, 3), dtype=np.uint8),
             counts=np.ones(50, dtype=np.uint16),
             free_cells=rng.integers(-100, 100, (2, 20), dtype=np.int16), cell_m=0.05,
+            offsets=rng.integers(0, 125, 50, dtype=np.uint8), offset_levels=5,
         ),
         m.Correction(robot_id=1, tick=3, submap_ids=np.arange(2, dtype=np.int32),
                      T_world_submap=np.stack([np.eye(4)] * 2)),
@@ -123,6 +124,15 @@ def test_wrong_dtype_and_shape() -> None:
     obj["K"]["data"] = obj["K"]["data"][:-8]
     with pytest.raises(DecodeError, match="invalid rgbd"):
         decode(_pack(obj))
+
+
+def test_submap_arrays_must_agree_per_voxel() -> None:
+    submap = next(s for s in _samples() if isinstance(s, m.Submap))
+    for field, value in (("colors", submap.colors[:-1]), ("offsets", submap.offsets[:-1]),
+                         ("offsets", np.full(50, 125, np.uint8))):  # a code ≥ 5³
+        with pytest.raises(DecodeError, match="invalid submap"):
+            decode(encode(submap.model_copy(update={field: value})))
+    assert decode(encode(submap.model_copy(update={"offsets": np.zeros(0, np.uint8)})))
 
 
 def test_nan_and_infinite_values() -> None:

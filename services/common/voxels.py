@@ -38,6 +38,27 @@ def centres(indices: np.ndarray, voxel_m: float) -> np.ndarray:
     return (indices.astype(np.float64) + 0.5) * voxel_m
 
 
+def offset_codes(
+    indices: np.ndarray, points: np.ndarray, voxel_m: float, levels: int
+) -> np.ndarray:
+    """(N,) uint8 cell (i, j, k) of an L×L×L split of each voxel that holds its point, coded
+    (i·L + j)·L + k (L = `levels` ≤ 6); a point outside its voxel is clamped to it."""
+    if not 1 <= levels <= 6:
+        raise ValueError(f"levels must be 1..6, got {levels}")
+    frac = np.asarray(points, np.float64) / voxel_m - indices
+    ijk = np.clip(np.floor(frac * levels), 0, levels - 1).astype(np.int64)
+    return ((ijk[:, 0] * levels + ijk[:, 1]) * levels + ijk[:, 2]).astype(np.uint8)
+
+
+def offset_points(
+    indices: np.ndarray, codes: np.ndarray, voxel_m: float, levels: int
+) -> np.ndarray:
+    """(N, 3) float64 centres of the coded cells (`offset_codes`' inverse, within a cell)."""
+    codes = np.asarray(codes, np.int64)
+    ijk = np.stack([codes // (levels * levels), (codes // levels) % levels, codes % levels], 1)
+    return (indices + (ijk + 0.5) / levels) * voxel_m
+
+
 def downsample(
     points: np.ndarray, voxel_m: float, colors: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:

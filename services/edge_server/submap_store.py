@@ -1,10 +1,11 @@
 """The edge's copy of every robot's submaps, built from `Submap` deltas.
 
 A submap is keyed by (robot_id, submap_id). Its voxels are kept in the submap frame as packed
-voxel keys (services.common.voxels) with the agent's latest mean point, colour, observation
-count and the tick each voxel was first received (the merged map uses it to name a voxel's
-first observer). New voxels are only
-ever appended, so consumers can cache by length. `version` bumps on new data and
+voxel keys (services.common.voxels) with the agent's latest mean point (decoded from the
+message's offset code, at the edge's `voxel_m`, which must be the agents'), colour,
+observation count and the tick each voxel was first received (the merged map uses it to name
+a voxel's first observer). New voxels are only ever appended, so consumers can cache by
+length. `version` bumps on new data and
 `pose_version` when the pose changes, so the merged map and grid know what to recompute.
 
 Poses: `T_reported` is the agent's latest estimate; `T_world_submap` is where the submap is
@@ -24,7 +25,7 @@ import numpy as np
 
 from schemas.messages import Submap
 from services.common.arrays import unique_first, unique_rows_2
-from services.common.voxels import pack, voxel_indices
+from services.common.voxels import offset_points, pack, voxel_indices
 
 log = logging.getLogger(__name__)
 
@@ -104,10 +105,12 @@ class SubmapStore:
             sm.T_world_submap = msg.T_world_submap.copy()
             sm.pose_version += 1
         sm.T_reported = msg.T_world_submap.copy()
-        points_submap = msg.points_mm.T.astype(np.float64) / 1000.0  # mm → m, (N, 3)
-        if points_submap.shape[0]:
-            keys = pack(voxel_indices(points_submap, self.voxel_m))
-            _upsert(sm, keys, points_submap.astype(np.float32), msg.colors, msg.counts,
+        centres_submap = msg.points_mm.T.astype(np.float64) / 1000.0  # mm → m, (N, 3)
+        if centres_submap.shape[0]:
+            indices = voxel_indices(centres_submap, self.voxel_m)
+            points = centres_submap if not msg.offsets.size else offset_points(
+                indices, msg.offsets, self.voxel_m, msg.offset_levels)
+            _upsert(sm, pack(indices), points.astype(np.float32), msg.colors, msg.counts,
                     msg.tick)
         if msg.free_cells.shape[1]:
             cells = np.concatenate([sm.free_cells, msg.free_cells.T.astype(np.int64)])

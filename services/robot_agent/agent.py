@@ -419,6 +419,7 @@ class AgentCore:
             T_world_submap=self.T_world_loc @ delta.T_odom_submap,
             points_mm=delta.points_mm, colors=delta.colors, counts=delta.counts,
             free_cells=delta.free_cells, cell_m=self.config.cell_m,
+            offsets=delta.offsets, offset_levels=delta.offset_levels,
         )
         self.seq += 1
         return msg

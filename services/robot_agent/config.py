@@ -149,9 +149,16 @@ class AgentConfig(BaseModel):
     color_resend: int = Field(
         default=24, ge=0, description="resend a voxel when its mean colour moves this much"
     )
-    # 1 mm steps made the submap traffic 2.3x that of voxel centres (zstd); 5 mm, 1.4 mm RMS
-    point_step_mm: int = Field(
-        default=5, ge=2, description="a voxel's mean point is sent on this grid inside it"
+    # 2 (counts within 2x, unused by the edge) cost 21-32 kB/s with means; 8: 19 kB/s (house)
+    resend_growth: int = Field(
+        default=8, ge=2, description="a voxel is sent again when its point count reaches the "
+        "next power of this (the edge's counts are within this factor; means and colours refine)"
+    )
+    # means as int16 mm made the submap traffic 1.7-2.3x that of centres (zstd); a centre
+    # plus one byte of L^3 cells costs about +30 % on the points (docs/agent.md)
+    mean_levels: int = Field(
+        default=5, ge=1, le=6, description="a voxel's mean point is sent as one of L×L×L cells "
+        "of the voxel (5: 1 cm cells, 2.9 mm RMS at 5 cm voxels); 1: voxel centres only"
     )
     # -- local 2D grid ---------------------------------------------------------------------
     cell_m: float = Field(default=0.05, gt=0, description="2D grid and free-cell size")

@@ -2,11 +2,12 @@
 
 A submap's points live in the `submap` frame, the robot base pose when the keyframe started,
 so the edge can move a whole submap when its pose is corrected. Each voxel keeps its mean point,
-mean colour and observation count, and is sent as its mean point (on the surface, where the
-voxel centre would stair-step it by up to half a voxel). A voxel is (re)sent when it is new,
-when its count reaches the next power of two, or when its mean colour moves by `color_resend`:
-the edge gets counts within 2× and colours within that bound, at a fraction of the traffic of
-resending every seen voxel.
+mean colour and observation count, and is sent as its centre plus a one-byte code of where in
+the voxel its mean lies (`offsets`: on the surface, where the centre alone would stair-step it
+by up to half a voxel; centres compress far better than means would). A voxel is (re)sent
+when it is new, when its count reaches the next power of `resend_growth`, or when its mean
+colour moves by `color_resend`: the edge gets counts within that factor, and colours within that
+bound, at a fraction of the traffic of resending every seen voxel.
 """
 
 from __future__ import annotations
@@ -30,31 +31,20 @@ class SubmapDelta:
 
     submap_id: int
     T_odom_submap: np.ndarray  # (4, 4) keyframe pose in the odometry frame
-    points_mm: np.ndarray  # (3, N) int16 voxel means (inside their voxel), submap frame, mm
+    points_mm: np.ndarray  # (3, N) int16 voxel centres, submap frame, mm
     colors: np.ndarray  # (N, 3) uint8
     counts: np.ndarray  # (N,) uint16
     free_cells: np.ndarray  # (2, M) int16 (x, y) cells in the submap frame
+    offsets: np.ndarray  # (N,) uint8 where each voxel's mean lies (voxels.offset_codes)
+    offset_levels: int  # L of `offsets`; 1: no means sent (empty offsets)
 
 
-def _bit_length(values: np.ndarray) -> np.ndarray:
-    """floor(log2(v)) + 1 for v ≥ 1, 0 for 0 (vectorized int.bit_length)."""
+def _growth_level(values: np.ndarray, growth: int) -> np.ndarray:
+    """(N,) 0 for 0, else 1 + floor(log_growth(value)): a voxel is resent when it rises."""
     out = np.zeros(values.shape, dtype=np.int64)
     pos = values > 0
-    out[pos] = np.floor(np.log2(values[pos])).astype(np.int64) + 1
+    out[pos] = np.floor(np.log2(values[pos]) / np.log2(growth) + 1e-9).astype(np.int64) + 1
     return out
-
-
-def _voxel_means_mm(
-    keys: np.ndarray, means_m: np.ndarray, voxel_m: float, step_mm: int
-) -> np.ndarray:
-    """(3, N) int16 voxel means in mm on a `step_mm` grid inside each voxel, at least 1 mm
-    from its faces so that the receiver's `voxel_indices` gives back the same keys."""
-    voxel_mm = round(voxel_m * 1000.0)
-    if abs(voxel_m * 1000.0 - voxel_mm) > 1e-6 or voxel_mm < 2 * step_mm:
-        raise ValueError(f"voxel_m must be whole millimetres ≥ 2 steps, got {voxel_m}")
-    lo_mm = voxels.unpack(keys) * voxel_mm
-    steps = np.clip(np.floor((means_m * 1000.0 - lo_mm) / step_mm), 0, voxel_mm // step_mm - 1)
-    return (lo_mm + steps * step_mm + step_mm // 2).astype(np.int16).T.copy()
 
 
 class VoxelSubmap:
@@ -167,12 +157,12 @@ class VoxelSubmap:
         self.pending_free = [cells] if cells.size else []
 
     def take_delta(
-        self, voxel_m: float, color_resend: int, step_mm: int = 5
+        self, voxel_m: float, color_resend: int, levels: int = 5, growth: int = 2
     ) -> SubmapDelta | None:
         """The changed voxels and new free cells since the last call, marked as sent."""
         colors = self.mean_colors()
         dirty = (self.sent_counts == 0) & (self.counts > 0)
-        dirty |= _bit_length(self.counts) > _bit_length(self.sent_counts)
+        dirty |= _growth_level(self.counts, growth) > _growth_level(self.sent_counts, growth)
         if color_resend > 0:
             moved = np.abs(colors - self.sent_colors).max(axis=1, initial=0) >= color_resend
             dirty |= moved & (self.sent_counts > 0)
@@ -181,17 +171,20 @@ class VoxelSubmap:
         self.pose_dirty = False
         self.sent_counts[dirty] = self.counts[dirty]
         self.sent_colors[dirty] = colors[dirty]
-        points_mm = _voxel_means_mm(self.keys[dirty], self.mean_points()[dirty], voxel_m,
-                                    step_mm)
+        indices = voxels.unpack(self.keys[dirty])
+        centres = voxels.centres(indices, voxel_m)
+        offsets = (voxels.offset_codes(indices, self.mean_points()[dirty], voxel_m, levels)
+                   if levels > 1 else np.zeros(0, np.uint8))
         free = np.concatenate([np.empty((2, 0), np.int64), *self.pending_free], axis=1)
         self.pending_free = []
         return SubmapDelta(
             submap_id=self.submap_id,
             T_odom_submap=self.pose().copy(),
-            points_mm=points_mm,
+            points_mm=np.round(centres * 1000.0).astype(np.int16).T.copy(),
             colors=colors[dirty].astype(np.uint8),
             counts=np.minimum(self.counts[dirty], np.iinfo(np.uint16).max).astype(np.uint16),
             free_cells=np.ascontiguousarray(free.astype(np.int16)),
+            offsets=offsets, offset_levels=levels,
         )
 
 
@@ -239,7 +232,7 @@ class KeyframeMapper:
         if self.current is None:
             return None
         return self.current.take_delta(self.config.voxel_m, self.config.color_resend,
-                                       self.config.point_step_mm)
+                                       self.config.mean_levels, self.config.resend_growth)
 
     def submaps(self) -> list[VoxelSubmap]:
         """Every submap, oldest first, the open one last."""
@@ -265,7 +258,7 @@ class KeyframeMapper:
         for sub in self.done:
             if sub.pose_dirty:
                 delta = sub.take_delta(self.config.voxel_m, self.config.color_resend,
-                                       self.config.point_step_mm)
+                                       self.config.mean_levels, self.config.resend_growth)
                 out += [delta] if delta is not None else []
         return out
 
@@ -280,7 +273,7 @@ class KeyframeMapper:
         for sub in [*self.done, *([self.current] if self.current is not None else [])]:
             sub.mark_unsent()
             delta = sub.take_delta(self.config.voxel_m, self.config.color_resend,
-                                       self.config.point_step_mm)
+                                   self.config.mean_levels, self.config.resend_growth)
             out += [delta] if delta is not None else []
         return out
 
