@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import ndimage
@@ -43,12 +44,14 @@ from services.edge_server.goals import GoalBook
 from services.edge_server.importance import importance
 from services.edge_server.merged_grid import GridSnapshot, MergedGrid
 from services.edge_server.merged_map import MergedMap
-from services.edge_server.merger import MapMerger, MergerParams
 from services.edge_server.robot_fields import InflationCache, RobotFields
 from services.edge_server.robot_views import robot_grid
 from services.edge_server.rrt import rrt_frontier_mask
 from services.edge_server.spatial_frontiers import detect_spatial_frontiers, subset
 from services.edge_server.submap_store import SubmapStore
+
+if TYPE_CHECKING:
+    from services.edge_server.merger import MapMerger
 
 
 @dataclass(frozen=True)
@@ -96,8 +99,7 @@ class EdgePlanner:
         self.config = config
         self.tick_s = tick_s
         self.store = SubmapStore(config.voxel_m)
-        self.merger = MapMerger(config.voxel_m,
-                                MergerParams(max_registrations=config.max_registrations))
+        self._merger: MapMerger | None = None
         self.merged = MergedMap(config.voxel_m)
         self.grid = MergedGrid(config)
         self.book = GoalBook(config)
@@ -137,6 +139,17 @@ class EdgePlanner:
     # -- planning --------------------------------------------------------------------------
     def active_robots(self) -> list[int]:
         return sorted(r for r in self.poses if r not in self.dead)
+
+    @property
+    def merger(self) -> MapMerger:
+        """The pose-graph merger, made on first use: it alone needs gtsam, whose import costs
+        the edge 0.3 s of CPU at every start when `merge` is off."""
+        if self._merger is None:
+            from services.edge_server.merger import MapMerger, MergerParams
+
+            self._merger = MapMerger(
+                self.config.voxel_m, MergerParams(max_registrations=self.config.max_registrations))
+        return self._merger
 
     def robot_grid(self, robot_id: int, tick: int) -> OccupancyGrid | None:
         """One robot's own grid on the merged grid's current bounds (map/robot_grid)."""

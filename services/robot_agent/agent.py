@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -37,7 +38,6 @@ from schemas.messages import (
 from services.common.geometry import T_from_xyyaw, invert, transform_points, xyyaw_from_T
 from services.common.inventory import inventory_of
 from services.robot_agent.awareness import in_view_partial, visible_paper
-from services.robot_agent.back_end import BackEnd
 from services.robot_agent.config import AgentConfig
 from services.robot_agent.drf import filter_mask
 from services.robot_agent.exploration import local_frontier_goal
@@ -48,6 +48,9 @@ from services.robot_agent.navigation import Command, Navigator, StatusEvent, inf
 from services.robot_agent.params import drf_params, loop_params, registration_params
 from services.robot_agent.projection import cam_to_base, depth_to_points, pixel_colors
 from services.robot_agent.teammates import predict_xy
+
+if TYPE_CHECKING:
+    from services.robot_agent.back_end import BackEnd
 
 log = logging.getLogger(__name__)
 
@@ -78,6 +81,16 @@ def _xy_in(T_to_from: np.ndarray, xy_from: np.ndarray) -> np.ndarray:
     return xy_from @ T_to_from[:2, :2].T + T_to_from[:2, 3]
 
 
+def _back_end(config: AgentConfig, robot_id: int) -> BackEnd | None:
+    """The keyframe pose graph when loop closure is on; imported only then, since it alone
+    needs gtsam (0.3 s of CPU at every agent start otherwise)."""
+    if not (config.loop_closure and config.registration):
+        return None
+    from services.robot_agent.back_end import BackEnd
+
+    return BackEnd(loop_params(config), robot_id)
+
+
 def hfov_of(K: np.ndarray, width: int) -> float:
     """Horizontal field of view of a pinhole camera, rad."""
     return 2.0 * math.atan2(width / 2.0, K[0, 0])
@@ -102,8 +115,7 @@ class AgentCore:
         self.edge_grid: OccupancyGrid | None = None
         self.mapper = KeyframeMapper(config)
         self.localizer = Localizer(registration_params(config))
-        self.back_end = BackEnd(loop_params(config), robot_id) \
-            if config.loop_closure and config.registration else None
+        self.back_end = _back_end(config, robot_id)
         self.n_frames = 0
         self.nav = Navigator(config, tick_s)
         self.teammates: dict[int, RobotPose] = {}

@@ -28,13 +28,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import open3d as o3d
 
 from services.common import voxels
+from services.common.dbscan import dbscan_labels
 from services.common.geometry import invert, transform_points
 
 MAX_VOXELS = 800  # DBSCAN cost grows fast with the point count (field notes: 3 ms at 2k)
-o3d.utility.set_max_threads(1)  # one frame is small; threads only add overhead on 2 cores
 
 
 @dataclass(frozen=True)
@@ -133,8 +132,7 @@ def robot_cluster(
         keys = voxels.pack(voxels.voxel_indices(points_base, 2 * params.voxel_m))
         _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
     reps = points_base[first]
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(reps))
-    labels = np.asarray(cloud.cluster_dbscan(params.eps_m, params.min_points, False))
+    labels = dbscan_labels(reps, params.eps_m, params.min_points)
     reach = params.radius_m + params.c
     max_diag = 2 * params.radius_m + 2 * params.voxel_m
     robot = np.zeros(labels.shape, bool)

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from services.robot_agent.config import AgentConfig
 from services.robot_agent.drf import DrfParams
 from services.robot_agent.drift_filter import FilterParams
-from services.robot_agent.keyframe_graph import LoopParams
 from services.robot_agent.localization import RegistrationParams
 from services.robot_agent.odometry_calibration import CalibrationParams
+
+if TYPE_CHECKING:
+    from services.robot_agent.keyframe_graph import LoopParams
 
 
 def registration_params(cfg: AgentConfig) -> RegistrationParams:
@@ -29,6 +33,8 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
 
 
 def loop_params(cfg: AgentConfig) -> LoopParams:
+    from services.robot_agent.keyframe_graph import LoopParams  # gtsam: only with the back end
+
     return LoopParams(search_radius_m=cfg.loop_search_radius_m,
                       max_candidates=cfg.loop_max_candidates)
 
