@@ -1,0 +1,168 @@
+"""Edge planner cost on a real mission's messages: replay a recording of
+`bench_agent_replay.py record` through `EdgePlanner` offline, timed per stage.
+
+The edge plans at Clock(k) for every k a multiple of `sim.edge_every_ticks` with the messages
+stamped before k (node.py), so feeding the recorded submaps, poses and goal statuses in tick
+order and planning at each edge tick repeats the mission's plans: `--check` compares the goals
+and grids the replay makes with the mission's byte for byte, which shows a speed change left
+the results alone. Every agent is taken as alive throughout (true for a normal mission).
+
+    .venv/bin/python bench/bench_agent_replay.py record /tmp/agent_rec -- \
+        --robots 3 --sim-time 300 --seed 0 --sample-every 0
+    .venv/bin/python bench/bench_edge_replay.py /tmp/agent_rec --check
+    .venv/bin/python bench/bench_edge_replay.py /tmp/agent_rec --profile
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import os
+import pstats
+import statistics
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_agent_replay import LOG, StageTimer, read_log  # noqa: E402
+
+from schemas import encode  # noqa: E402
+from schemas.codec import decode  # noqa: E402
+from schemas.keys import Keys  # noqa: E402
+from schemas.messages import GoalStatus, Message, RobotPose, Submap  # noqa: E402
+from services.config import load_config  # noqa: E402
+from services.edge_server import planner as planner_mod  # noqa: E402
+from services.edge_server.planner import EdgePlanner  # noqa: E402
+
+INPUTS: dict[str, type[Message]] = {"submap": Submap, "pose": RobotPose,
+                                    "goal_status": GoalStatus}
+
+
+def edge_inputs(keys: Keys, path: Path) -> Iterator[tuple[str, str, bytes]]:
+    """(topic, key, payload) of what the edge subscribes to, and of what it published
+    (topics "goal" and "grid"), in recorded order."""
+    robots = f"{keys.prefix}/robot/"
+    grid = keys.map_grid()
+    for key, payload in read_log(path):
+        if key == grid:
+            yield "grid", key, payload
+        elif key.startswith(robots):
+            topic = key.rsplit("/", 1)[1]
+            if topic in INPUTS or topic == "goal":
+                yield topic, key, payload
+
+
+def instrument(planner: EdgePlanner, timer: StageTimer) -> None:
+    """Time the plan's stages on this planner instance (and the module functions it calls)."""
+    planner.merged.update = timer.wrap("merged map update", planner.merged.update)
+    planner.grid.update = timer.wrap("merged grid update", planner.grid.update)
+    planner._frontiers = timer.wrap("frontiers (2D or 3D)", planner._frontiers)
+    planner.book.plan = timer.wrap("goal book: assignment", planner.book.plan)
+    for name, stage in (("RobotFields", "robot distance fields"),
+                        ("goal_transform", "goal transform (EDT)"),
+                        ("detect_spatial_frontiers", "- 3D F_u/F_w regions")):
+        setattr(planner_mod, name, timer.wrap(stage, getattr(planner_mod, name)))
+
+
+def replay(rec: Path, limit: int | None) -> tuple[StageTimer, list[float], dict, int]:
+    """(timer, CPU s per plan, mismatches per output, plans) of the whole recording."""
+    config = load_config(rec / "run" / "config.yaml", {})
+    keys = Keys(config.bus.prefix)
+    planner = EdgePlanner(config.edge, config.sim.tick_s)
+    for robot in range(config.sim.robots):
+        planner.on_agent(robot, True)
+    timer = StageTimer()
+    instrument(planner, timer)
+    every = config.sim.edge_every_ticks
+    inbox: list[Message] = []
+    expected: dict[str, list[bytes]] = {"goal": [], "grid": []}
+    for topic, _key, payload in edge_inputs(keys, rec / LOG):
+        if topic in expected:
+            expected[topic].append(payload)
+        else:
+            inbox.append(decode(payload, INPUTS[topic], config.bus.max_array_bytes))
+    last = max((m.tick for m in inbox), default=0)  # type: ignore[attr-defined]
+    produced: dict[str, list[bytes]] = {"goal": [], "grid": []}
+    plan_s: list[float] = []
+    fed = 0
+    ordered = sorted(range(len(inbox)), key=lambda i: inbox[i].tick)  # type: ignore[attr-defined]
+    for k in range(0, last + 1, every):
+        while fed < len(ordered) and inbox[ordered[fed]].tick < k:  # type: ignore[attr-defined]
+            _feed(planner, inbox[ordered[fed]])
+            fed += 1
+        t0 = time.process_time()
+        out = planner.plan(k)
+        plan_s.append(time.process_time() - t0)
+        timer.close_tick()
+        produced["goal"] += [encode(g) for g in out.goals]
+        if out.grid is not None:
+            produced["grid"].append(encode(out.grid))
+        if limit is not None and len(plan_s) >= limit:
+            break
+    partial = limit is not None
+    mismatches = {t: _mismatch(expected[t], produced[t], partial) for t in expected}
+    return timer, plan_s, mismatches, len(plan_s)
+
+
+def _feed(planner: EdgePlanner, msg: Message) -> None:
+    if isinstance(msg, Submap):
+        planner.on_submap(msg)
+    elif isinstance(msg, RobotPose):
+        planner.on_pose(msg)
+    elif isinstance(msg, GoalStatus):
+        planner.on_goal_status(msg)
+
+
+def _mismatch(expected: list[bytes], produced: list[bytes], partial: bool) -> str:
+    if partial:
+        expected = expected[: len(produced)]
+    if len(expected) != len(produced):
+        return f"{len(produced)} made, the mission published {len(expected)}"
+    bad = [i for i, (a, b) in enumerate(zip(expected, produced, strict=True)) if a != b]
+    return f"first differs at #{bad[0]} ({len(bad)} differ)" if bad else "identical"
+
+
+def report(timer: StageTimer, plan_s: list[float]) -> None:
+    total = sum(plan_s)
+    print(f"{len(plan_s)} plans; CPU {total:.2f} s; median {1e3 * statistics.median(plan_s):.1f}"
+          f" ms, p90 {1e3 * sorted(plan_s)[int(0.9 * (len(plan_s) - 1))]:.1f} ms\n")
+    print("| stage | total s | share of plans % | median ms |\n|---|---:|---:|---:|")
+    names = sorted({n for t in timer.ticks for n in t},
+                   key=lambda n: -sum(t.get(n, 0.0) for t in timer.ticks))
+    for name in names:
+        per = [t[name] for t in timer.ticks if name in t]
+        print(f"| {name} | {sum(per):.2f} | {100 * sum(per) / total:.1f} | "
+              f"{1e3 * statistics.median(per):.1f} |")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("recording", type=Path)
+    parser.add_argument("--check", action="store_true",
+                        help="compare goals and grids with the mission's, byte for byte")
+    parser.add_argument("--profile", action="store_true", help="cProfile the replay")
+    parser.add_argument("--limit", type=int, default=None, help="stop after this many plans")
+    args = parser.parse_args()
+    prof = cProfile.Profile() if args.profile else None
+    if prof is not None:
+        prof.enable()
+    timer, plan_s, mismatches, _ = replay(args.recording, args.limit)
+    if prof is not None:
+        prof.disable()
+        pstats.Stats(prof).sort_stats("cumulative").print_stats(30)
+        pstats.Stats(prof).sort_stats("tottime").print_stats(25)
+    report(timer, plan_s)
+    if args.check:
+        print("\noutputs against the mission: " + ", ".join(
+            f"{t} {v}" for t, v in mismatches.items()))
+        if any(v != "identical" for v in mismatches.values()):
+            sys.exit(1)
+
+
+if __name__ == "__main__":
+    main()
