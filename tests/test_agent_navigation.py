@@ -125,6 +125,17 @@ def test_no_goal_spins_in_place() -> None:
     assert ev is None and cmd.v_mps == 0.0 and cmd.omega_radps == CFG.spin_omega_radps
 
 
+def test_holds_still_before_the_first_goal_when_asked_and_spins_after_one() -> None:
+    cfg = CFG.model_copy(update={"spin_before_first_goal": False})
+    nav, grid = Navigator(cfg, DT), _wall_grid()
+    cmd, _ = nav.step((0.0, 0.0, 0.0), grid, 0)
+    assert cmd.v_mps == 0.0 and cmd.omega_radps == 0.0
+    nav.set_goal(_goal(1.0, 1.0), 1)
+    assert nav.cancel(1)
+    cmd, _ = nav.step((0.0, 0.0, 0.0), grid, 2)
+    assert cmd.omega_radps == cfg.spin_omega_radps > 0
+
+
 def test_same_goal_id_is_not_restarted_and_segment_times_add_up() -> None:
     nav = Navigator(CFG, DT)
     assert nav.set_goal(_goal(1.0, 1.0), 0) is not None

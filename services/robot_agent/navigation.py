@@ -153,6 +153,7 @@ class Navigator:
         self.log = PassLog(0)
         self.state = "idle"
         self.arrived_tick: int | None = None  # at f′, turning to the goal's look point
+        self.had_goal = False
 
     def set_goal(self, goal: Goal, tick: int) -> StatusEvent | None:
         """Adopt a goal; the same goal id again changes nothing."""
@@ -160,6 +161,7 @@ class Navigator:
             return None
         self.goal, self.path_xy, self.index = goal, None, 0
         self.arrived_tick = None
+        self.had_goal = True
         self.log = PassLog(tick)
         return StatusEvent(goal.goal_id, "active")
 
@@ -215,7 +217,8 @@ class Navigator:
         cfg = self.config
         if self.goal is None:
             self.state = "idle"
-            return Command(0.0, cfg.spin_omega_radps), None
+            spin = self.had_goal or cfg.spin_before_first_goal
+            return Command(0.0, cfg.spin_omega_radps if spin else 0.0), None
         if self.arrived_tick is not None:
             return self._look(pose, tick)
         xy = np.array(pose[:2])
