@@ -117,6 +117,7 @@ class AgentCore:
         self.localizer = Localizer(registration_params(config))
         self.back_end = _back_end(config, robot_id)
         self.n_frames = 0
+        self.view_hidden = False  # the last frame was too hidden by teammates to register
         self.nav = Navigator(config, tick_s)
         self.teammates: dict[int, RobotPose] = {}
         self.teammates_prev: dict[int, RobotPose] = {}  # the one before, for the velocity
@@ -215,7 +216,9 @@ class AgentCore:
                 log.info("robot %d: first frame at tick %d (%d skipped waiting for teammates)",
                          self.robot_id, odom.tick, self.frames_skipped)
             cam, points_base = self._filtered_points(frame, T_loc_base, odom.tick)
-            T_loc_base = self._register(points_base, T_odom_base, self._drf_removed_frac(frame))
+            removed = self._drf_removed_frac(frame)
+            self.view_hidden = removed > self.config.reg_max_removed_frac
+            T_loc_base = self._register(points_base, T_odom_base, removed)
         T_world_base = self._T_world_front() @ T_loc_base
         pose_world = xyyaw_from_T(T_world_base)
         self._ensure_grid(pose_world)
@@ -227,6 +230,9 @@ class AgentCore:
         events = self._navigate_goal_inputs(pose_world, odom.tick)
         cmd, event = self.nav.step(pose_world, self.grid, odom.tick)
         cmd = self._yield_to_teammates(pose_world, cmd, odom.tick)
+        if self.nav.state == "idle" and self.view_hidden and \
+                not self.config.idle_spin_when_hidden:
+            cmd = Command(0.0, 0.0)  # a turn no frame can register: hold still
         if self.n_frames == 0:
             # Still until the first frame anchors the map: odometry drifts only with motion, and
             # the yaw it lost in a first spin (0.1-0.5 deg) would rotate the whole map.

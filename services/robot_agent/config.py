@@ -181,6 +181,10 @@ class AgentConfig(BaseModel):
         default=0.35, gt=0, description="on arrival, a goal's look point this far off the "
         "heading counts as faced (well inside the camera's half FoV)")
     spin_omega_radps: float = Field(default=0.4, ge=0, description="rotation while idle")
+    idle_spin_when_hidden: bool = Field(
+        default=True, description="spin while idle even when teammates hide the view (False: "
+        "hold still while the last frame was too hidden to register: the turn would go "
+        "unregistered and odometry's turn error would stay in the map)")
     spin_before_first_goal: bool = Field(
         default=True, description="spin while idle before the first goal too (False: hold "
         "still: robots that start side by side see mostly teammates, so the turn goes "
