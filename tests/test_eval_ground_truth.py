@@ -3,6 +3,7 @@ AWS house against its Gazebo map."""
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import mujoco
@@ -12,7 +13,7 @@ import pytest
 from services.evaluator.config import EvalConfig
 from services.evaluator.free_space import reachable_free_grid
 from services.evaluator.gazebo_map import compare_with_ros_map, load_ros_map
-from services.evaluator.ground_truth import ground_truth
+from services.evaluator.ground_truth import _load, _save, ground_truth
 from services.evaluator.observable import observable_surface
 from services.evaluator.surfaces import surface_samples
 
@@ -101,6 +102,18 @@ def test_ground_truth_cache_is_identical(room: mujoco.MjModel, tmp_path: Path) -
     assert first.free_grid.spec == second.free_grid.spec
     ground_truth(room, SPAWN, config.model_copy(update={"seed": 1}), cache_dir=tmp_path)
     assert len(list(tmp_path.glob("gt-*.npz"))) == 2  # parameters are part of the key
+
+
+def test_concurrent_cache_writers_do_not_collide(room: mujoco.MjModel, tmp_path: Path) -> None:
+    """Two missions of one world may fill the cache at the same moment (they did, and one
+    died renaming a temporary file the other had already renamed)."""
+    config = EvalConfig(density_per_m2=100, visibility_rounds=4)
+    truth = ground_truth(room, SPAWN, config, cache_dir=tmp_path)
+    path = next(tmp_path.glob("gt-*.npz"))
+    with ThreadPoolExecutor(max_workers=8) as pool:
+        list(pool.map(lambda _: _save(path, truth), range(16)))  # raises if one collides
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]  # no temporary left behind
+    np.testing.assert_array_equal(_load(path).observable, truth.observable)
 
 
 @pytest.mark.skipif(not AWS.is_dir(), reason=f"AWS house world not found at {AWS}")

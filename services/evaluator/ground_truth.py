@@ -9,6 +9,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import os
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -78,7 +79,10 @@ def compute_ground_truth(
 
 def _save(path: Path, gt: GroundTruth) -> None:
     spec = gt.free_grid.spec
-    tmp = path.with_suffix(".tmp.npz")
+    # a unique temporary name: two missions of one world may fill the cache at once
+    fd, name = tempfile.mkstemp(dir=path.parent, prefix=path.stem + ".", suffix=".tmp.npz")
+    os.close(fd)
+    tmp = Path(name)
     np.savez_compressed(
         tmp, spec=np.array([spec.origin_x, spec.origin_y, spec.resolution_m]),
         occupied=gt.free_grid.occupied, centres=gt.free_grid.centres, free=gt.free_grid.free,
