@@ -196,3 +196,25 @@ def test_a_frame_that_matched_few_points_is_a_weaker_measurement() -> None:
     strong = fuse(np.zeros(3), P, yaw, R, PARAMS).xyyaw[2]
     weak = fuse(np.zeros(3), P, yaw, R * overlap_inflation(0.2, on), PARAMS).xyyaw[2]
     assert 0.0 < weak < strong  # believed less
+
+
+def test_a_frame_gicp_did_not_converge_on_can_still_correct_the_guess() -> None:
+    """Turning fast, GICP can stop short of its 6-DoF tolerance while its planar pose is
+    already good (house seed 0, robot 2: guess 0.7° off, unconverged GICP 0.07°); inserting
+    the frame at the guess then built the error into the map."""
+    rng = np.random.default_rng(7)
+    room = _room(rng)
+    truth = T_from_xyyaw(-1.0, 0.1, 0.3)
+    off = truth @ T_from_xyyaw(0.0, 0.0, math.radians(0.8))  # the odometry guess
+    errors = {}
+    for use in (False, True):
+        loc = Localizer(RegistrationParams(map_voxel_m=0.05, min_points=30, filter=PARAMS,
+                                           min_inlier_frac=0.15, max_iterations=1,
+                                           use_unconverged=use))
+        loc.update(_seen(room, truth), truth)  # the map, at the true pose
+        loc.P = np.diag([1e-4, 1e-4, math.radians(1.0) ** 2])  # the guess is this uncertain
+        loc.T_loc_odom = off @ invert(truth)
+        out = loc.update(_seen(room, truth), truth)
+        assert out.accepted == use and (use or out.reason == "not converged")
+        errors[use] = abs(math.degrees(xyyaw_from_T(invert(truth) @ out.T_loc_base)[2]))
+    assert errors[False] > 0.79 and errors[True] < 0.4

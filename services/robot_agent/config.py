@@ -80,6 +80,10 @@ class AgentConfig(BaseModel):
     reg_reacquire_rad_per_rad: float = Field(
         default=0.03, ge=0, description="re-acquisition: how far (rad per rad turned) the "
         "drift rejected registrations imply may change between them (odometry turn error)")
+    reg_use_unconverged: bool = Field(
+        default=False, description="GICP's pose on a frame it did not converge on (15 "
+        "iterations) is fused by the filter like a converged one; false: the frame keeps the "
+        "odometry guess and joins the map there")
     reg_insert_min_m: float = Field(
         default=0.0, ge=0, description="a registered frame joins the registration map only "
         "this far from the last one that did (0 = every frame)")
@@ -181,6 +185,8 @@ class AgentConfig(BaseModel):
         default=0.35, gt=0, description="on arrival, a goal's look point this far off the "
         "heading counts as faced (well inside the camera's half FoV)")
     spin_omega_radps: float = Field(default=0.4, ge=0, description="rotation while idle")
+    # False: warehouse, 24 robots, 60 s, seeds 0 / 1: BV 43.3 / 26.9 → 29.1 / 23.2 %, ATE 19.0 /
+    # 10.8 → 9.3 / 9.0 cm; 3 robots, 9 missions in three worlds: 8 identical (docs/agent.md)
     idle_spin_when_hidden: bool = Field(
         default=True, description="spin while idle even when teammates hide the view (False: "
         "hold still while the last frame was too hidden to register: the turn would go "

@@ -73,6 +73,9 @@ class RegistrationParams:
     # with the filter: a frame GICP did not converge on joins the map at the odometry guess
     # (False: it stays out, as frames of new ground do not)
     insert_unconverged: bool = True
+    # with the filter: GICP's pose on a frame it did not converge on is a measurement like any
+    # other (the filter weighs and gates it); False: the frame keeps the odometry guess
+    use_unconverged: bool = False
 
 
 @dataclass(frozen=True)
@@ -151,10 +154,10 @@ class FrameRegistrar:
             self.voxelmap, cloud, guess, max_correspondence_distance=p.max_corr_m,
             num_threads=1, max_iterations=p.max_iterations,
         )
-        if not res.converged:
+        if not res.converged and not p.use_unconverged:
             return "not converged"
         if res.num_inliers < p.min_inlier_frac * cloud.size():
-            return "few inliers"
+            return "few inliers" if res.converged else "not converged"
         return planar(res.T_target_source), np.asarray(res.H), res.num_inliers / cloud.size()
 
     def insert(self, cloud: small_gicp.PointCloud, T_loc_base: np.ndarray) -> None:

@@ -21,6 +21,7 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
         map_voxel_m=cfg.reg_map_voxel_m, degenerate_ratio=cfg.reg_degenerate_ratio,
         max_removed_frac=cfg.reg_max_removed_frac, min_points=cfg.reg_min_points,
         insert_min_m=cfg.reg_insert_min_m, insert_min_rad=cfg.reg_insert_min_rad,
+        use_unconverged=cfg.reg_use_unconverged,
         filter=FilterParams(reacquire_rad_per_rad=cfg.reg_reacquire_rad_per_rad,
                             coupled_length_m=cfg.reg_coupled_length_m,
                             r_m=cfg.reg_sigma_m, r_rad=cfg.reg_sigma_rad,
