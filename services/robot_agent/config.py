@@ -187,8 +187,10 @@ class AgentConfig(BaseModel):
     spin_omega_radps: float = Field(default=0.4, ge=0, description="rotation while idle")
     # False: warehouse, 24 robots, 60 s, seeds 0 / 1: BV 43.3 / 26.9 → 29.1 / 23.2 %, ATE 19.0 /
     # 10.8 → 9.3 / 9.0 cm; 3 robots, 9 missions in three worlds: 8 identical (docs/agent.md)
+    # False: warehouse, 24 robots, 60 s, seeds 0 / 1: BV 43.3 / 26.9 → 29.1 / 23.2 %, ATE 19.0 /
+    # 10.8 → 9.3 / 9.0 cm; 3 robots, 9 missions in three worlds: 8 identical (docs/agent.md)
     idle_spin_when_hidden: bool = Field(
-        default=True, description="spin while idle even when teammates hide the view (False: "
+        default=False, description="spin while idle even when teammates hide the view (False: "
         "hold still while the last frame was too hidden to register: the turn would go "
         "unregistered and odometry's turn error would stay in the map)")
     spin_before_first_goal: bool = Field(
