@@ -80,6 +80,16 @@ class AgentConfig(BaseModel):
     reg_reacquire_rad_per_rad: float = Field(
         default=0.03, ge=0, description="re-acquisition: how far (rad per rad turned) the "
         "drift rejected registrations imply may change between them (odometry turn error)")
+    reg_max_corr_m: float = Field(
+        default=0.3, gt=0, description="GICP's largest correspondence distance, m; the voxel "
+        "map looks only in the voxel a point falls in, so above its diagonal (8.7 cm at 5 cm) "
+        "it changes nothing: 0.15 and 0.3 gave 15 identical missions")
+    reg_coarse_voxel_m: float = Field(
+        default=0.0, ge=0, description="> 0: frames the registration map matched poorly are "
+        "aligned first on a second map of this voxel size (localization.py); 0 = none")
+    reg_coarse_below_frac: float = Field(
+        default=0.5, ge=0, le=1, description="with the coarse map: frames GICP converged on "
+        "but matched under this share of their points try it too (0 = unconverged ones only)")
     reg_use_unconverged: bool = Field(
         default=False, description="GICP's pose on a frame it did not converge on (15 "
         "iterations) is fused by the filter like a converged one; false: the frame keeps the "

@@ -76,6 +76,13 @@ class RegistrationParams:
     # with the filter: GICP's pose on a frame it did not converge on is a measurement like any
     # other (the filter weighs and gates it); False: the frame keeps the odometry guess
     use_unconverged: bool = False
+    # with the filter: a second, coarser voxel map (m; 0 = none). A frame GICP did not
+    # converge on against the fine map (which finds a correspondence only inside the voxel a
+    # point falls in, so a 0.6° guess error puts far points out of reach), or that matched
+    # under coarse_below_frac of its points, is aligned on the coarse map first, then on the
+    # fine map from there; the alignment that matched more points is kept
+    coarse_voxel_m: float = 0.0
+    coarse_below_frac: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -98,6 +105,8 @@ class FrameRegistrar:
     def __init__(self, params: RegistrationParams) -> None:
         self.params = params
         self.voxelmap = LazyLruVoxelMap(params.map_voxel_m, params.map_horizon)
+        self.coarse = (LazyLruVoxelMap(params.coarse_voxel_m, params.map_horizon)
+                       if params.coarse_voxel_m > 0 else None)
         self.n_inserted = 0
         self.T_odom_accepted: np.ndarray | None = None  # odometry at the last accepted one
         self.n_accepted = 0
@@ -141,7 +150,7 @@ class FrameRegistrar:
         if outcome.accepted or self.n_inserted == 0:
             self.T_odom_accepted = odom.copy()
             self.n_accepted += int(outcome.accepted)
-        self.voxelmap.insert(cloud, outcome.T_loc_base)
+        self._insert_maps(cloud, outcome.T_loc_base)
         self.n_inserted += 1
         return outcome
 
@@ -150,18 +159,33 @@ class FrameRegistrar:
         """(planar T_loc_base, GICP Hessian, inlier fraction) of one frame against the map,
         or why not."""
         p = self.params
-        res = small_gicp.align(
-            self.voxelmap, cloud, guess, max_correspondence_distance=p.max_corr_m,
-            num_threads=1, max_iterations=p.max_iterations,
-        )
+        res = self._gicp(self.voxelmap, cloud, guess)
+        if self.coarse is not None and (
+                not res.converged or res.num_inliers < p.coarse_below_frac * cloud.size()):
+            rough = self._gicp(self.coarse, cloud, guess)
+            if rough.converged:
+                fine = self._gicp(self.voxelmap, cloud, planar(rough.T_target_source))
+                if fine.converged and (not res.converged or fine.num_inliers > res.num_inliers):
+                    res = fine
         if not res.converged and not p.use_unconverged:
             return "not converged"
         if res.num_inliers < p.min_inlier_frac * cloud.size():
             return "few inliers" if res.converged else "not converged"
         return planar(res.T_target_source), np.asarray(res.H), res.num_inliers / cloud.size()
 
-    def insert(self, cloud: small_gicp.PointCloud, T_loc_base: np.ndarray) -> None:
+    def _gicp(self, target: LazyLruVoxelMap, cloud: small_gicp.PointCloud,
+              guess: np.ndarray) -> small_gicp.RegistrationResult:
+        p = self.params
+        return small_gicp.align(target, cloud, guess, max_correspondence_distance=p.max_corr_m,
+                                num_threads=1, max_iterations=p.max_iterations)
+
+    def _insert_maps(self, cloud: small_gicp.PointCloud, T_loc_base: np.ndarray) -> None:
         self.voxelmap.insert(cloud, T_loc_base)
+        if self.coarse is not None:
+            self.coarse.insert(cloud, T_loc_base)
+
+    def insert(self, cloud: small_gicp.PointCloud, T_loc_base: np.ndarray) -> None:
+        self._insert_maps(cloud, T_loc_base)
         self.n_inserted += 1
         self.T_inserted = T_loc_base
 
