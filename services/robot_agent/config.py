@@ -90,6 +90,9 @@ class AgentConfig(BaseModel):
     reg_coarse_below_frac: float = Field(
         default=0.5, ge=0, le=1, description="with the coarse map: frames GICP converged on "
         "but matched under this share of their points try it too (0 = unconverged ones only)")
+    reg_coarse_agree_rad: float = Field(
+        default=0.0, ge=0, description="with the coarse map: its pose is kept only within this "
+        "yaw of the fine map's own answer, rad (0 = always)")
     reg_use_unconverged: bool = Field(
         default=False, description="GICP's pose on a frame it did not converge on (15 "
         "iterations) is fused by the filter like a converged one; false: the frame keeps the "

@@ -83,6 +83,9 @@ class RegistrationParams:
     # fine map from there; the alignment that matched more points is kept
     coarse_voxel_m: float = 0.0
     coarse_below_frac: float = 0.5
+    # > 0: the coarse route's pose is kept only within this yaw (rad) of the fine map's own
+    # answer (converged or not), so it confirms rather than replaces it
+    coarse_agree_rad: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -165,7 +168,11 @@ class FrameRegistrar:
             rough = self._gicp(self.coarse, cloud, guess)
             if rough.converged:
                 fine = self._gicp(self.voxelmap, cloud, planar(rough.T_target_source))
-                if fine.converged and (not res.converged or fine.num_inliers > res.num_inliers):
+                agree = p.coarse_agree_rad <= 0 or abs(wrap_angle(
+                    xyyaw_from_T(fine.T_target_source)[2]
+                    - xyyaw_from_T(res.T_target_source)[2])) < p.coarse_agree_rad
+                if fine.converged and agree and (
+                        not res.converged or fine.num_inliers > res.num_inliers):
                     res = fine
         if not res.converged and not p.use_unconverged:
             return "not converged"
