@@ -93,6 +93,13 @@ class AgentConfig(BaseModel):
     reg_coarse_agree_rad: float = Field(
         default=0.0, ge=0, description="with the coarse map: its pose is kept only within this "
         "yaw of the fine map's own answer, rad (0 = always)")
+    reg_scan_heading: bool = Field(
+        default=False, description="the heading change between consecutive frames measured "
+        "from the frames registered to each other too, fused with odometry's by their "
+        "variances (scan_odometry.py; needs the filter fusion)")
+    reg_scan_sigma_rad: float = Field(
+        default=0.0025, gt=0, description="with reg_scan_heading: σ of that heading change per "
+        "frame, rad")
     reg_use_unconverged: bool = Field(
         default=False, description="GICP's pose on a frame it did not converge on (15 "
         "iterations) is fused by the filter like a converged one; false: the frame keeps the "
@@ -125,6 +132,10 @@ class AgentConfig(BaseModel):
         default=0.02, gt=0, description="heading error per √rad turned the drift filter "
         "expects of the odometry (its process noise; 0.02 covers a 1 % turn-scale error and "
         "the 1 % random walk)")
+    odom_heading_sigma_per_sqrt_m: float = Field(
+        default=0.01, gt=0, description="heading error per √m driven the drift filter expects "
+        "of the odometry (its process noise; the simulator's heading bias is 0.005 rad/m, "
+        "which the calibration learns)")
     odom_calibration_segment_m: float = Field(
         default=1.0, gt=0, description="a calibration segment closes after this much driving")
     reg_min_points: int = Field(

@@ -18,7 +18,7 @@ fixed 8 cm / 0.05 rad gate letting GICP slide 10 cm and 1.6° within a few frame
 from __future__ import annotations
 
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import small_gicp
@@ -37,6 +37,7 @@ from services.robot_agent.odometry_calibration import (
     CalibrationParams,
     is_good_registration,
 )
+from services.robot_agent.scan_odometry import ScanOdometry, ScanOdometryParams
 from services.robot_agent.voxel_map import LazyLruVoxelMap
 
 
@@ -86,6 +87,9 @@ class RegistrationParams:
     # > 0: the coarse route's pose is kept only within this yaw (rad) of the fine map's own
     # answer (converged or not), so it confirms rather than replaces it
     coarse_agree_rad: float = 0.0
+    # with the filter: the heading change since the previous frame from the two frames
+    # registered to each other (scan_odometry.py) replaces odometry's (None = odometry's)
+    scan_odometry: ScanOdometryParams | None = None
 
 
 @dataclass(frozen=True)
@@ -116,14 +120,20 @@ class FrameRegistrar:
         self.T_inserted: np.ndarray | None = None  # pose of the last frame inserted
 
     def _cloud(self, points_base: np.ndarray) -> small_gicp.PointCloud | None:
+        out = self.cloud_tree(points_base)
+        return None if out is None else out[0]
+
+    def cloud_tree(self, points_base: np.ndarray,
+                   ) -> tuple[small_gicp.PointCloud, small_gicp.KdTree] | None:
+        """The frame downsampled, with covariances and its k-d tree (None: too few points)."""
         pts = points_base[points_base[:, 2] > self.params.floor_z_m]
         if pts.shape[0] < self.params.min_points:
             return None
-        cloud, _ = small_gicp.preprocess_points(
+        cloud, tree = small_gicp.preprocess_points(
             np.ascontiguousarray(pts, dtype=np.float64), self.params.downsample_m,
             num_neighbors=10, num_threads=1,
         )
-        return cloud if cloud.size() >= self.params.min_points else None
+        return (cloud, tree) if cloud.size() >= self.params.min_points else None
 
     def gate(self, T_odom_base: np.ndarray) -> tuple[float, float]:
         """(m, rad) largest correction odometry drift can explain since the last acceptance."""
@@ -263,6 +273,9 @@ class Localizer:
         self.odometry = (CalibratedOdometry(params.calibration)
                          if params.calibration is not None and params.filter is not None
                          else None)
+        self.scans = (ScanOdometry(params.scan_odometry)
+                      if params.scan_odometry is not None and params.filter is not None
+                      else None)
 
     def observe_odometry(self, T_odom_raw: np.ndarray) -> None:
         """Integrate one raw odometry pose into the corrected chain (every tick)."""
@@ -289,15 +302,22 @@ class Localizer:
         filt = self.registrar.params.filter
         self.observe_odometry(T_odom_base)
         T_odom_base = self._calibrated(T_odom_base)
-        guess = self.T_loc_odom @ T_odom_base
+        hidden = (removed_frac > self.registrar.params.max_removed_frac
+                  and self.registrar.n_inserted > 0)
+        frame = None if hidden or filt is None else self.registrar.cloud_tree(points_base)
         if filt is not None and self._T_odom_prev is not None:
-            self.P = predict(self.P, np.array(xyyaw_from_T(self.T_loc_odom @ self._T_odom_prev)),
-                             np.array(xyyaw_from_T(guess)), filt)
+            T_prev = self.T_loc_odom @ self._T_odom_prev
+            T_odom_base, filt_step = self._scan_turn(frame, T_odom_base, filt)
+            self.P = predict(self.P, np.array(xyyaw_from_T(T_prev)),
+                             np.array(xyyaw_from_T(self.T_loc_odom @ T_odom_base)), filt_step)
+        elif self.scans is not None and frame is not None:
+            self.scans.turn(*frame, T_odom_base)  # the first frame: remembered only
+        guess = self.T_loc_odom @ T_odom_base
         self._T_odom_prev = T_odom_base.copy()
-        if removed_frac > self.registrar.params.max_removed_frac and self.registrar.n_inserted:
+        if hidden:
             outcome = RegistrationOutcome(guess, False, "hidden by teammates")
         elif filt is not None:
-            outcome = self._filtered(points_base, guess, filt)
+            outcome = self._filtered(frame, guess, filt)
         else:
             outcome = self.registrar.register(points_base, guess, T_odom_base)
         self.outcomes["accepted" if outcome.accepted else outcome.reason] += 1
@@ -305,13 +325,42 @@ class Localizer:
         self.T_loc_odom = planar(outcome.T_loc_base @ invert(T_odom_base))
         return outcome
 
-    def _filtered(self, points_base: np.ndarray, guess: np.ndarray,
-                  filt: FilterParams) -> RegistrationOutcome:
+    def _scan_turn(self, frame: tuple[small_gicp.PointCloud, small_gicp.KdTree] | None,
+                   T_odom_base: np.ndarray, filt: FilterParams,
+                   ) -> tuple[np.ndarray, FilterParams]:
+        """The odometry pose with its heading change since the last frame fused with the
+        frames' own (when they give it), and the process noise that step carries."""
+        if self.scans is None:
+            return T_odom_base, filt
+        if frame is None:
+            self.scans.reset()
+            return T_odom_base, filt
+        scan_turn = self.scans.turn(*frame, T_odom_base)
+        if scan_turn is None:
+            return T_odom_base, filt
+        x0, y0, yaw0 = xyyaw_from_T(self._T_odom_prev)
+        x1, y1, yaw1 = xyyaw_from_T(T_odom_base)
+        odom_turn = wrap_angle(yaw1 - yaw0)
+        # inverse-variance weights: odometry's heading is good driving straight (its error
+        # grows with the turn), the frames' is good at any turn rate
+        q_odom = (filt.q_rad2 + filt.q_rad2_per_rad * abs(odom_turn)
+                  + filt.q_rad2_per_m * float(np.hypot(x1 - x0, y1 - y0)))
+        q_scan = self.scans.params.sigma_rad ** 2
+        turn = (odom_turn * q_scan + scan_turn * q_odom) / (q_odom + q_scan)
+        # the odometry chain stays continuous: what the frames say about this step's heading
+        # is absorbed into T_loc_odom, like a registration's correction
+        T_fused = T_from_xyyaw(x1, y1, yaw0 + turn)
+        self.T_loc_odom = planar(self.T_loc_odom @ T_fused @ invert(T_odom_base))
+        return T_odom_base, replace(filt, q_rad2=q_odom * q_scan / (q_odom + q_scan),
+                                    q_rad2_per_rad=0.0, q_rad2_per_m=0.0)
+
+    def _filtered(self, frame: tuple[small_gicp.PointCloud, small_gicp.KdTree] | None,
+                  guess: np.ndarray, filt: FilterParams) -> RegistrationOutcome:
         """Register, fuse with the odometry guess by the filter, insert what it accepts."""
         reg = self.registrar
-        cloud = reg._cloud(points_base)
-        if cloud is None:
+        if frame is None:
             return RegistrationOutcome(guess, False, "too few points")
+        cloud = frame[0]
         if reg.n_inserted == 0:
             reg.insert(cloud, guess)
             return RegistrationOutcome(guess, False, "empty map")

@@ -9,6 +9,7 @@ from services.robot_agent.drf import DrfParams
 from services.robot_agent.drift_filter import FilterParams
 from services.robot_agent.localization import RegistrationParams
 from services.robot_agent.odometry_calibration import CalibrationParams
+from services.robot_agent.scan_odometry import ScanOdometryParams
 
 if TYPE_CHECKING:
     from services.robot_agent.keyframe_graph import LoopParams
@@ -28,10 +29,13 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
                             coupled_length_m=cfg.reg_coupled_length_m,
                             r_m=cfg.reg_sigma_m, r_rad=cfg.reg_sigma_rad,
                             full_overlap_frac=cfg.reg_full_overlap_frac,
-                            q_rad2_per_rad=cfg.odom_turn_sigma_per_sqrt_rad**2)
+                            q_rad2_per_rad=cfg.odom_turn_sigma_per_sqrt_rad**2,
+                            q_rad2_per_m=cfg.odom_heading_sigma_per_sqrt_m**2)
         if cfg.reg_fusion == "filter" else None,
         calibration=CalibrationParams(segment_m=cfg.odom_calibration_segment_m)
         if cfg.odom_calibration else None,
+        scan_odometry=ScanOdometryParams(sigma_rad=cfg.reg_scan_sigma_rad)
+        if cfg.reg_scan_heading else None,
     )
 
 
