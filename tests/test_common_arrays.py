@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from services.common.arrays import unique_first, unique_rows_2, unique_sorted
+from services.common.arrays import union_rows_2, unique_first, unique_rows_2, unique_sorted
 from services.edge_server.frontier_cache import _diff
 
 
@@ -18,6 +18,19 @@ def test_unique_helpers_match_numpy() -> None:
     assert np.array_equal(unique_rows_2(rc), np.unique(rc, axis=0))
     assert unique_sorted(np.zeros(0, np.int64)).size == 0
     assert unique_rows_2(np.zeros((0, 2), np.int64)).shape == (0, 2)
+
+
+def test_union_rows_2_equals_a_unique_of_both() -> None:
+    rng = np.random.default_rng(1)
+    for n_old, n_more in [(0, 0), (0, 40), (300, 0), (300, 40), (5, 400)]:
+        old = unique_rows_2(rng.integers(-30, 30, (n_old, 2)))
+        more = rng.integers(-40, 40, (n_more, 2))
+        shared = min(n_more // 2, len(old))  # half of `more` already known
+        more[:shared] = old[:shared]
+        union = union_rows_2(old, more)
+        assert np.array_equal(union, np.unique(np.concatenate([old, more]).reshape(-1, 2),
+                                               axis=0)), (n_old, n_more)
+        assert union.dtype == np.int64 and union.shape[1] == 2
 
 
 def test_diff_of_sorted_sets() -> None:

@@ -172,3 +172,29 @@ def test_merged_points_are_the_first_observers_latest_means() -> None:
     merged.update(store)
     np.testing.assert_allclose(merged.points_world, [[0.04, 0.04, 0.14], [1.02, 0.021, 0.12]],
                                atol=1e-6)
+
+
+def test_grid_free_cells_cached_union_equals_from_scratch() -> None:
+    """The stable submaps' free-cell union, kept incrementally, is the union of all of them
+    after growth, new submaps, a late delta to an old submap and a pose correction."""
+    rng = np.random.default_rng(3)
+    store, grid = SubmapStore(V), MergedGrid(EdgeConfig())
+    seq = {0: 0, 1: 0}
+
+    def send(robot: int, submap: int, tick: int) -> None:
+        T = T_from_xyyaw(0.3 * submap, 0.2 * robot, 0.1 * submap)
+        store.apply(make_submap(robot, submap, seq[robot], tick, T, np.zeros((0, 3)),
+                                rng.integers(-30, 30, (40, 2))))
+        seq[robot] += 1
+
+    def from_scratch() -> np.ndarray:
+        fresh = MergedGrid(EdgeConfig())
+        return np.unique(fresh._all_free_rc(store), axis=0)
+
+    steps = [(0, 0), (1, 0), (0, 0), (0, 1), (1, 1), (0, 2), (0, 1), (1, 2), (1, 0)]
+    for tick, (robot, submap) in enumerate(steps):
+        send(robot, submap, tick)
+        assert np.array_equal(np.unique(grid._all_free_rc(store), axis=0), from_scratch())
+    store.set_pose((0, 1), T_from_xyyaw(0.5, -0.4, 0.7))  # a stable submap moves
+    assert np.array_equal(np.unique(grid._all_free_rc(store), axis=0), from_scratch())
+    assert len(grid._stable[0]) == 4  # all but each robot's newest

@@ -30,9 +30,29 @@ def unique_first(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return s[keep], order[keep]
 
 
+def _pack_rows_2(rc: np.ndarray) -> np.ndarray:
+    rc = np.asarray(rc, np.int64).reshape(-1, 2)
+    return (rc[:, 0] << 32) + (rc[:, 1] + _COL_BIAS)
+
+
+def _unpack_rows_2(keys: np.ndarray) -> np.ndarray:
+    return np.stack([keys >> 32, (keys & 0xFFFFFFFF) - _COL_BIAS], axis=1)
+
+
 def unique_rows_2(rc: np.ndarray) -> np.ndarray:
     """Unique rows of an (N, 2) int64 array with |values| < 2^31, sorted lexicographically
     (= np.unique(rc, axis=0))."""
-    rc = np.asarray(rc, np.int64).reshape(-1, 2)
-    keys = unique_sorted((rc[:, 0] << 32) + (rc[:, 1] + _COL_BIAS))
-    return np.stack([keys >> 32, (keys & 0xFFFFFFFF) - _COL_BIAS], axis=1)
+    return _unpack_rows_2(unique_sorted(_pack_rows_2(rc)))
+
+
+def union_rows_2(sorted_rc: np.ndarray, more_rc: np.ndarray) -> np.ndarray:
+    """unique_rows_2(concatenate([sorted_rc, more_rc])) when `sorted_rc` is already an output
+    of unique_rows_2: only `more_rc` is sorted, so a large set grows in linear time."""
+    old = _pack_rows_2(sorted_rc)
+    more = unique_sorted(_pack_rows_2(more_rc))
+    at = np.searchsorted(old, more)
+    known = at < old.size
+    known[known] = old[at[known]] == more[known]
+    if known.all():
+        return _unpack_rows_2(old)
+    return _unpack_rows_2(np.insert(old, at[~known], more[~known]))

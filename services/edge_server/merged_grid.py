@@ -12,12 +12,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from services.common.arrays import unique_rows_2
+from services.common.arrays import union_rows_2, unique_rows_2
 from services.common.grid import GridSpec
 from services.common.voxels import centres, unpack
 from services.edge_server.config import EdgeConfig
 from services.edge_server.merged_map import MergedMap
 from services.edge_server.submap_store import StoredSubmap, SubmapKey, SubmapStore
+
+Stamp = tuple[int, int, float]  # a submap's (version, pose_version, cell_m)
 
 UNKNOWN, FREE, OCCUPIED = -1, 0, 100
 
@@ -83,9 +85,9 @@ class MergedGrid:
     def __init__(self, config: EdgeConfig) -> None:
         self.config = config
         self.bounds = config.grid_bounds_m
-        self._free_rc: dict[SubmapKey, tuple[int, int, np.ndarray]] = {}
+        self._free_rc: dict[SubmapKey, tuple[Stamp, np.ndarray]] = {}
         self._obstacle_rc: tuple[int, np.ndarray] = (-1, np.zeros((0, 2), np.int64))
-        self._stable: tuple[tuple, np.ndarray] = ((), np.zeros((0, 2), np.int64))
+        self._stable: tuple[dict[SubmapKey, Stamp], np.ndarray] = ({}, np.zeros((0, 2), np.int64))
 
     def _all_free_rc(self, store: SubmapStore) -> np.ndarray:
         """Absolute world cells of every submap's free cells (duplicates possible), cached per
@@ -93,22 +95,33 @@ class MergedGrid:
         deduplicated set (those rarely change, and overlapping submaps repeat most cells)."""
         res = self.config.grid_resolution_m
         cells: dict[SubmapKey, np.ndarray] = {}
-        stamps: dict[SubmapKey, tuple[int, int]] = {}
+        stamps: dict[SubmapKey, Stamp] = {}
         for sm in store.ordered():
+            stamp = (sm.version, sm.pose_version, sm.cell_m)
             cached = self._free_rc.get(sm.key)
-            if cached is None or cached[:2] != (sm.version, sm.pose_version):
-                cached = (sm.version, sm.pose_version, world_cells(free_cells_world(sm), res))
+            if cached is None or cached[0] != stamp:
+                cached = (stamp, world_cells(free_cells_world(sm), res))
                 self._free_rc[sm.key] = cached
-            cells[sm.key] = cached[2]
-            stamps[sm.key] = cached[:2]
+            cells[sm.key], stamps[sm.key] = cached[1], stamp
         newest = {robot: max(k for k in cells if k[0] == robot) for robot in {k[0] for k in cells}}
-        stable = sorted(k for k in cells if k not in newest.values())
-        signature = tuple((k, stamps[k]) for k in stable)
-        if signature != self._stable[0]:
-            union = (unique_rows_2(np.concatenate([cells[k] for k in stable])) if stable
-                     else np.zeros((0, 2), np.int64))
-            self._stable = (signature, union)
+        stable = {k: stamps[k] for k in sorted(cells) if k not in newest.values()}
+        if stable != self._stable[0]:
+            self._stable = (stable, self._stable_union(stable, cells))
         return np.concatenate([self._stable[1]] + [cells[k] for k in sorted(newest.values())])
+
+    def _stable_union(self, stable: dict[SubmapKey, Stamp],
+                      cells: dict[SubmapKey, np.ndarray]) -> np.ndarray:
+        """The deduplicated cells of the `stable` submaps. A submap's free cells only grow
+        while its pose and cell size stay (SubmapStore.apply), so when no submap left the set
+        or moved, the cached union only takes the changed submaps' cells in."""
+        before, union = self._stable
+        grown = before.keys() <= stable.keys() and all(
+            stable[k][1:] == stamp[1:] for k, stamp in before.items())
+        if not grown:
+            return (unique_rows_2(np.concatenate([cells[k] for k in stable])) if stable
+                    else np.zeros((0, 2), np.int64))
+        changed = [cells[k] for k, stamp in stable.items() if before.get(k) != stamp]
+        return union_rows_2(union, np.concatenate(changed))
 
     def _band_xy(self, points_world: np.ndarray) -> np.ndarray:
         z = points_world[:, 2]
@@ -135,7 +148,7 @@ class MergedGrid:
             if self._obstacle_rc[0] == merged.version - 1 and added is not None:
                 # one delta since the last grid: only the new voxels' band cells (P* is large)
                 new_rc = world_cells(self._band_xy(centres(unpack(added), merged.voxel_m)), res)
-                rc = unique_rows_2(np.concatenate([self._obstacle_rc[1], new_rc]))
+                rc = union_rows_2(self._obstacle_rc[1], new_rc)
             else:
                 rc = world_cells(self._band_xy(merged.centres_world), res)
             self._obstacle_rc = (merged.version, rc)

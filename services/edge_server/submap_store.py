@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from schemas.messages import Submap
-from services.common.arrays import unique_first, unique_rows_2
+from services.common.arrays import union_rows_2, unique_first
 from services.common.voxels import offset_points, pack, voxel_indices
 
 log = logging.getLogger(__name__)
@@ -113,8 +113,7 @@ class SubmapStore:
             _upsert(sm, pack(indices), points.astype(np.float32), msg.colors, msg.counts,
                     msg.tick)
         if msg.free_cells.shape[1]:
-            cells = np.concatenate([sm.free_cells, msg.free_cells.T.astype(np.int64)])
-            sm.free_cells = unique_rows_2(cells)
+            sm.free_cells = union_rows_2(sm.free_cells, msg.free_cells.T.astype(np.int64))
         sm.cell_m = msg.cell_m
         sm.version += 1
         self.version += 1
