@@ -49,8 +49,12 @@ def unpack_fields(packed: np.ndarray) -> np.ndarray:
     out = np.empty((len(FIELD_BITS), packed.size), np.int64)
     for i, bits in enumerate(FIELD_BITS):
         half = 1 << (bits - 1)
-        out[i] = ((v + half) & ((1 << bits) - 1)) - half
-        v = (v - out[i]) >> bits
+        field = out[i]  # ((v + half) & mask) - half, in place: no temporaries per field
+        np.add(v, half, out=field)
+        np.bitwise_and(field, (1 << bits) - 1, out=field)
+        field -= half
+        v -= field
+        v >>= bits
     return out
 
 

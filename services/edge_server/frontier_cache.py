@@ -39,6 +39,12 @@ class LatticeStats:
     def _strides(self) -> np.ndarray:
         return np.array([self.dims[1] * self.dims[2], self.dims[2], 1], np.int64)
 
+    def _flat(self, idx: np.ndarray) -> np.ndarray:
+        """Box offsets of voxels `idx` (M, 3); by columns: an int64 matmul is 8× slower."""
+        s0, s1, _ = self._strides()
+        lo = self.lo
+        return (idx[:, 0] - lo[0]) * s0 + (idx[:, 1] - lo[1]) * s1 + (idx[:, 2] - lo[2])
+
     def _fit(self, idx: np.ndarray) -> None:
         """Grow the box (snapped to CHUNK_VOX) so every stencil cell of `idx` lies inside."""
         lo = idx.min(0) - self.pad
@@ -62,16 +68,15 @@ class LatticeStats:
         if idx.shape[0] == 0:
             return
         self._fit(idx)
-        strides = self._strides()
-        flat = (idx - self.lo) @ strides
-        off_flat = self.offsets @ strides
+        flat = self._flat(idx)
+        off_flat = self.offsets @ self._strides()
         for k in range(len(self.offsets)):
             # cell p = q − o sees q at offset +o; cells of one offset are distinct (no add.at)
             self.sums[flat - off_flat[k]] += sign * self._packed[k]
 
     def read(self, idx: np.ndarray) -> np.ndarray:
         """(5, N) int64 sums at voxels `idx` (must lie inside the box)."""
-        return unpack_fields(self.sums[(idx - self.lo) @ self._strides()])
+        return unpack_fields(self.sums[self._flat(idx)])
 
 
 def _diff(old: np.ndarray, new: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -113,10 +118,19 @@ class IncrementalFrontiers:
         self.stats.apply(unpack(added), +1)
         self.keys = keys
         idx = unpack(keys)
-        idx = idx[(idx[:, 2] + 0.5) * self.voxel_m <= self.z_max_m]
+        idx = idx[self._low_enough(idx[:, 2])]
         if idx.shape[0] == 0:
             return self._points(idx, np.zeros((5, 0), np.int64))
         return self._points(idx, self.stats.read(idx))
+
+    def _low_enough(self, z_idx: np.ndarray) -> np.ndarray:
+        """(N,) whether each voxel's centre is at most z_max_m high: evaluated once per z
+        level present (a few dozen), the same float expression as per voxel."""
+        if z_idx.size == 0:
+            return np.zeros(0, bool)
+        z0 = int(z_idx.min())
+        levels = np.arange(z0, int(z_idx.max()) + 1)
+        return ((levels + 0.5) * self.voxel_m <= self.z_max_m)[z_idx - z0]
 
     def _points(self, idx: np.ndarray, sums: np.ndarray) -> PointFrontiers:
         rho = sums[0]  # ≥ 1: a voxel counts itself
