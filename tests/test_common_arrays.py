@@ -2,7 +2,13 @@
 
 import numpy as np
 
-from services.common.arrays import union_rows_2, unique_first, unique_rows_2, unique_sorted
+from services.common.arrays import (
+    union_rows_2,
+    unique_first,
+    unique_groups,
+    unique_rows_2,
+    unique_sorted,
+)
 from services.edge_server.frontier_cache import _diff
 
 
@@ -39,3 +45,13 @@ def test_diff_of_sorted_sets() -> None:
     assert added.tolist() == [0, 4, 9] and removed.tolist() == [1, 5]
     added, removed = _diff(np.zeros(0, np.int64), new)
     assert added.tolist() == new.tolist() and removed.size == 0
+
+
+def test_unique_groups_equals_numpy() -> None:
+    rng = np.random.default_rng(2)
+    for keys in [rng.integers(-20, 20, 1000), np.repeat(rng.integers(0, 9, 50), 7),
+                 np.zeros(0, np.int64), np.array([5])]:
+        got = unique_groups(keys)
+        want = np.unique(keys, return_index=True, return_inverse=True, return_counts=True)
+        for g, w in zip(got, want, strict=True):
+            assert np.array_equal(g, w) and g.dtype == w.dtype, keys[:5]

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from services.common.arrays import unique_groups
+
 _BITS = 21
 _OFFSET = 1 << (_BITS - 1)
 _MASK = (1 << _BITS) - 1
@@ -68,7 +70,7 @@ def downsample(
     None, counts (M,) int64).
     """
     keys = pack(voxel_indices(points, voxel_m))
-    uniq, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
+    uniq, _, inverse, counts = unique_groups(keys)
     mean = np.stack(
         [np.bincount(inverse, weights=points[:, d], minlength=uniq.size) for d in range(3)], 1
     ) / counts[:, None]

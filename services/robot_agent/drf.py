@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from services.common import voxels
+from services.common.arrays import unique_groups
 from services.common.dbscan import dbscan_labels
 from services.common.geometry import invert, transform_points
 
@@ -127,10 +128,10 @@ def robot_cluster(
     if points_base.shape[0] == 0:
         return np.zeros(0, bool)
     keys = voxels.pack(voxels.voxel_indices(points_base, params.voxel_m))
-    _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+    _, first, inverse, _ = unique_groups(keys)
     if first.size > MAX_VOXELS:  # a robot right in front of the lens: coarser voxels
         keys = voxels.pack(voxels.voxel_indices(points_base, 2 * params.voxel_m))
-        _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+        _, first, inverse, _ = unique_groups(keys)
     reps = points_base[first]
     labels = dbscan_labels(reps, params.eps_m, params.min_points)
     reach = params.radius_m + params.c

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from services.common import voxels
-from services.common.arrays import unique_sorted
+from services.common.arrays import unique_groups, unique_sorted
 from services.common.geometry import invert, wrap_angle, xyyaw_from_T
 from services.robot_agent.config import AgentConfig
 
@@ -77,7 +77,7 @@ class VoxelSubmap:
         if points_submap.shape[0] == 0:
             return
         keys = voxels.pack(voxels.voxel_indices(points_submap, voxel_m))
-        uniq, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
+        uniq, _, inverse, counts = unique_groups(keys)
         col_sum = np.stack(
             [np.bincount(inverse, weights=colors[:, d], minlength=uniq.size) for d in range(3)], 1
         )
