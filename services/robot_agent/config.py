@@ -201,6 +201,9 @@ class AgentConfig(BaseModel):
     goal_snap_m: float = Field(default=0.6, ge=0, description="snap a blocked goal this far")
     replan_every_ticks: int = Field(default=20, ge=1)
     lookahead_m: float = Field(default=0.4, gt=0)
+    smooth_paths: bool = Field(
+        default=False, description="cut A*'s 0°/45° staircase short along lines of sight "
+        "(path_smoothing.py), so the robot drives straight instead of weaving")
     turn_in_place_rad: float = Field(
         default=0.7, gt=0, description="heading error above which the robot turns in place"
     )

@@ -19,6 +19,7 @@ from services.common.grid import GridSpec
 from services.common.planning import astar, disk, inflate, reachable
 from services.robot_agent.config import AgentConfig
 from services.robot_agent.local_grid import OCCUPIED, UNKNOWN, LocalGrid
+from services.robot_agent.path_smoothing import smooth_path
 from services.robot_agent.validator import PassLog, expected_times, window_exceeded
 
 WINDOW_MARGIN_M = 1.0
@@ -65,9 +66,10 @@ def snap_cell(mask: np.ndarray, rc: tuple[int, int], radius_cells: float) -> tup
 
 def plan_path(
     traversable: np.ndarray, spec: GridSpec, start_xy: np.ndarray, goal_xy: np.ndarray,
-    snap_m: float,
+    snap_m: float, smooth: bool = False,
 ) -> PlanResult:
-    """A* from start to goal; a blocked start or goal moves to the nearest usable cell."""
+    """A* from start to goal; a blocked start or goal moves to the nearest usable cell;
+    `smooth`: the path shortened along lines of sight (path_smoothing.py)."""
     rc = spec.cell_of(np.array([start_xy, goal_xy]))
     if not spec.contains(rc).all():
         return PlanResult(None, "goal outside the local grid")
@@ -85,7 +87,7 @@ def plan_path(
     path_rc = astar(traversable, start, goal)
     if path_rc is None:  # cannot happen after the reachability check; be safe
         return PlanResult(None, "A* found no path")
-    return PlanResult(spec.centre_of(path_rc))
+    return PlanResult(spec.centre_of(smooth_path(traversable, path_rc) if smooth else path_rc))
 
 
 def path_blocked(grid: LocalGrid, path_xy: np.ndarray, radius_cells: int) -> bool:
@@ -194,7 +196,7 @@ class Navigator:
         cells = grid.cells(rows, cols)
         radius = inflation_cells(cfg, spec.resolution_m)
         trav = traversable_of(cells, radius, cfg.plan_through_unknown)
-        result = plan_path(trav, sub, xy, goal_xy, cfg.goal_snap_m)
+        result = plan_path(trav, sub, xy, goal_xy, cfg.goal_snap_m, cfg.smooth_paths)
         self.plan_tick = tick
         if result.path_xy is not None:
             # The path starts at the robot's cell: t_e from the robot's pose, then the path.
