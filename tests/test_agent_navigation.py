@@ -142,3 +142,22 @@ def test_same_goal_id_is_not_restarted_and_segment_times_add_up() -> None:
     assert nav.set_goal(_goal(1.0, 1.0), 5) is None
     t = segment_times(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]), 0.5, math.pi / 4)
     np.testing.assert_allclose(t, [2.0, 2.0 + 2.0])
+
+
+def test_avoid_plans_around_a_teammate_until_the_next_replan() -> None:
+    grid = _wall_grid()
+    cfg = AgentConfig(smooth_paths=True)
+    nav = Navigator(cfg, DT)
+    nav.set_goal(_goal(-1.5, 1.5), 0)
+    nav.step((-1.5, -1.5, math.pi / 2), grid, 0)
+    assert nav.path_xy is not None
+    straight = nav.path_xy.copy()
+    assert np.abs(straight[:, 0] + 1.5).max() < 0.06  # the straight line x = -1.5
+    teammate = np.array([-1.5, 0.0])
+    nav.avoid(teammate, 1)
+    nav.step((-1.5, -1.5, math.pi / 2), grid, 1)
+    clearance = np.hypot(*(nav.path_xy - teammate).T).min()
+    assert clearance >= cfg.detour_radius_m + cfg.robot_radius_m - 0.05, clearance
+    nav.step((-1.5, -1.5, math.pi / 2), grid, 2 + cfg.replan_every_ticks)  # expired
+    assert nav.avoid_xy is None
+    assert np.abs(nav.path_xy[:, 0] + 1.5).max() < 0.06

@@ -121,6 +121,8 @@ class AgentCore:
         self.nav = Navigator(config, tick_s)
         self.teammates: dict[int, RobotPose] = {}
         self.teammates_prev: dict[int, RobotPose] = {}  # the one before, for the velocity
+        self.yield_start: tuple[int, int] | None = None  # (teammate, tick) yielding since
+        self.detour_rid: int | None = None  # the teammate the navigator plans around
         self.frames_skipped = 0  # frames dropped while waiting for the team's poses
         self.drf = drf_params(config)
         self.last_drf: DrfRecord | None = None
@@ -265,13 +267,32 @@ class AgentCore:
         for rid, p in sorted(self.teammates.items()):
             if tick - p.tick > cfg.teammate_max_age_ticks:
                 continue
-            rel = predict_xy(p, self.teammates_prev.get(rid), tick, cfg.predict_max_ticks) - \
-                np.array(pose_world[:2])
+            xy = predict_xy(p, self.teammates_prev.get(rid), tick, cfg.predict_max_ticks)
+            rel = xy - np.array(pose_world[:2])
             bearing = math.atan2(rel[1], rel[0]) - pose_world[2]
             bearing = math.atan2(math.sin(bearing), math.cos(bearing))
-            if np.hypot(*rel) < cfg.yield_dist_m and abs(bearing) < cfg.yield_half_angle_rad:
+            # planning around it: yield only where the bodies would touch
+            detouring = self.nav.avoid_xy is not None and self.detour_rid == rid
+            near = 2 * cfg.robot_radius_m + cfg.inflation_margin_m if detouring \
+                else cfg.yield_dist_m
+            if np.hypot(*rel) < near and abs(bearing) < cfg.yield_half_angle_rad:
+                self._maybe_detour(rid, xy, tick)
                 return Command(0.0, cmd.omega_radps)
+        self.yield_start = None
         return cmd
+
+    def _maybe_detour(self, rid: int, xy: np.ndarray, tick: int) -> None:
+        """Face to face, both robots yield: after a while the one of higher id (or, after
+        three times as long, either: the other may be parked) plans around the teammate."""
+        cfg = self.config
+        if self.yield_start is None or self.yield_start[0] != rid:
+            self.yield_start = (rid, tick)
+        waited = tick - self.yield_start[1]
+        due = cfg.yield_detour_ticks * (1 if self.robot_id > rid else 3)
+        if cfg.yield_detour_ticks > 0 and waited >= due:
+            self.nav.avoid(xy, tick)
+            self.detour_rid = rid
+            self.yield_start = (rid, tick)  # the next detour only after another wait
 
     def _ensure_grid(self, pose_world: tuple[float, float, float]) -> None:
         if self.grid is None:

@@ -228,6 +228,13 @@ class AgentConfig(BaseModel):
         default=0.7, ge=0, description="stop driving when a teammate centre is this close ahead"
     )
     yield_half_angle_rad: float = Field(default=math.pi / 3, ge=0)
+    yield_detour_ticks: int = Field(
+        default=0, ge=0, description="after yielding this long to a teammate of lower id "
+        "(3× as long to any), plan around it (0 = never: two robots face to face both yield "
+        "until the validator ends a goal)")
+    detour_radius_m: float = Field(
+        default=0.25, gt=0, description="a teammate blocks this radius of the planning grid "
+        "while detouring (the robot's own radius is added by the inflation)")
     validator_beta: int = Field(default=5, ge=1, description="β: path points in the window")
     validator_slack_s: float = Field(
         default=4.0, ge=0, description="added to Σ t_e over the window (acceleration, slow-down)"

@@ -155,6 +155,8 @@ class Navigator:
         self.log = PassLog(0)
         self.state = "idle"
         self.arrived_tick: int | None = None  # at f′, turning to the goal's look point
+        self.avoid_xy: np.ndarray | None = None  # a teammate to plan around (`avoid`)
+        self.avoid_until = -1
         self.had_goal = False
 
     def set_goal(self, goal: Goal, tick: int) -> StatusEvent | None:
@@ -193,7 +195,7 @@ class Navigator:
             spec.origin_y + rows.start * spec.resolution_m,
             spec.resolution_m, rows.stop - rows.start, cols.stop - cols.start,
         )
-        cells = grid.cells(rows, cols)
+        cells = self._blocked_by_teammate(grid.cells(rows, cols), sub, tick)
         radius = inflation_cells(cfg, spec.resolution_m)
         trav = traversable_of(cells, radius, cfg.plan_through_unknown)
         result = plan_path(trav, sub, xy, goal_xy, cfg.goal_snap_m, cfg.smooth_paths)
@@ -204,6 +206,25 @@ class Navigator:
             self.path_xy, self.index = path, 0
             self.t_e = expected_times(path, pose[2], cfg.max_v_mps, cfg.max_omega_radps)
         return result
+
+    def avoid(self, xy: np.ndarray, tick: int) -> None:
+        """Plan around a teammate at `xy` from now until the next periodic replan."""
+        self.avoid_xy = np.asarray(xy, np.float64).copy()
+        self.avoid_until = tick + self.config.replan_every_ticks
+        self.plan_tick = -(10**9)  # replan at the next step
+
+    def _blocked_by_teammate(self, cells: np.ndarray, spec: GridSpec, tick: int) -> np.ndarray:
+        """The planning cells with the avoided teammate's disc marked occupied."""
+        if self.avoid_xy is None or tick > self.avoid_until:
+            self.avoid_xy = None
+            return cells
+        r = int(math.ceil(self.config.detour_radius_m / spec.resolution_m))
+        centre = spec.cell_of(self.avoid_xy[None, :])[0]
+        rc = np.argwhere(disk(r)) - r + centre
+        rc = rc[spec.contains(rc)]
+        cells = cells.copy()
+        cells[rc[:, 0], rc[:, 1]] = OCCUPIED
+        return cells
 
     def _needs_plan(self, grid: LocalGrid, tick: int) -> bool:
         if self.path_xy is None or tick - self.plan_tick >= self.config.replan_every_ticks:
