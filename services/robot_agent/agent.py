@@ -48,6 +48,7 @@ from services.robot_agent.navigation import Command, Navigator, StatusEvent, inf
 from services.robot_agent.params import drf_params, loop_params, registration_params
 from services.robot_agent.projection import cam_to_base, depth_to_points, pixel_colors
 from services.robot_agent.teammates import predict_xy
+from services.robot_agent.yielding import YieldRule, blocker_ahead, yielded
 
 if TYPE_CHECKING:
     from services.robot_agent.back_end import BackEnd
@@ -121,8 +122,7 @@ class AgentCore:
         self.nav = Navigator(config, tick_s)
         self.teammates: dict[int, RobotPose] = {}
         self.teammates_prev: dict[int, RobotPose] = {}  # the one before, for the velocity
-        self.yield_start: tuple[int, int] | None = None  # (teammate, tick) yielding since
-        self.detour_rid: int | None = None  # the teammate the navigator plans around
+        self.yields = YieldRule(config, robot_id)
         self.frames_skipped = 0  # frames dropped while waiting for the team's poses
         self.drf = drf_params(config)
         self.last_drf: DrfRecord | None = None
@@ -257,42 +257,17 @@ class AgentCore:
 
     def _yield_to_teammates(self, pose_world: tuple[float, float, float], cmd: Command,
                             tick: int) -> Command:
-        """No forward motion into a teammate just ahead (turning still allowed).
-
-        The DRF keeps teammates out of the map and so out of the grid the planner avoids;
-        without this two robots pushed into each other for a minute in a mission."""
-        cfg = self.config
+        """No forward motion into a teammate just ahead (yielding.py); a detour around it
+        when the wait is long."""
         if cmd.v_mps <= 0.0:
             return cmd
-        for rid, p in sorted(self.teammates.items()):
-            if tick - p.tick > cfg.teammate_max_age_ticks:
-                continue
-            xy = predict_xy(p, self.teammates_prev.get(rid), tick, cfg.predict_max_ticks)
-            rel = xy - np.array(pose_world[:2])
-            bearing = math.atan2(rel[1], rel[0]) - pose_world[2]
-            bearing = math.atan2(math.sin(bearing), math.cos(bearing))
-            # planning around it: yield only where the bodies would touch
-            detouring = self.nav.avoid_xy is not None and self.detour_rid == rid
-            near = 2 * cfg.robot_radius_m + cfg.inflation_margin_m if detouring \
-                else cfg.yield_dist_m
-            if np.hypot(*rel) < near and abs(bearing) < cfg.yield_half_angle_rad:
-                self._maybe_detour(rid, xy, tick)
-                return Command(0.0, cmd.omega_radps)
-        self.yield_start = None
-        return cmd
-
-    def _maybe_detour(self, rid: int, xy: np.ndarray, tick: int) -> None:
-        """Face to face, both robots yield: after a while the one of higher id (or, after
-        three times as long, either: the other may be parked) plans around the teammate."""
-        cfg = self.config
-        if self.yield_start is None or self.yield_start[0] != rid:
-            self.yield_start = (rid, tick)
-        waited = tick - self.yield_start[1]
-        due = cfg.yield_detour_ticks * (1 if self.robot_id > rid else 3)
-        if cfg.yield_detour_ticks > 0 and waited >= due:
-            self.nav.avoid(xy, tick)
-            self.detour_rid = rid
-            self.yield_start = (rid, tick)  # the next detour only after another wait
+        passing = self.yields.passing if self.nav.avoid_xy is not None else None
+        blocker = blocker_ahead(pose_world, self.teammates, self.teammates_prev, tick,
+                                self.config, passing)
+        if self.yields.detour_due(blocker, tick):
+            assert blocker is not None
+            self.nav.avoid(blocker.xy, tick)
+        return cmd if blocker is None else yielded(cmd)
 
     def _ensure_grid(self, pose_world: tuple[float, float, float]) -> None:
         if self.grid is None:
