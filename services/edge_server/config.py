@@ -73,6 +73,11 @@ class EdgeConfig(BaseModel):
     space_successor_m: float = Field(
         default=0.0, ge=0, description="a robot this close to its goal (m, straight line) "
         "gets its next goal ahead (Goal.queued, successors.py); 0: it waits for the next plan")
+    space_grid_fallback: bool = Field(
+        default=False, description="when no 3D frontier region is usable (allowed and "
+        "reachable), assign the 2D grid's free/unknown frontiers instead of counting the plan "
+        "toward completion: an AWS-house mission ended at 59.7 % 3D coverage with a whole room "
+        "unknown on the grid and no F_u region there")
     nav_v_mps: float = Field(default=0.5, gt=0, description="the agents' max_v_mps (the "
                              "mission config copies it)")
     nav_omega_radps: float = Field(default=0.7853981633974483, gt=0,

@@ -47,7 +47,11 @@ from services.edge_server.merged_map import MergedMap
 from services.edge_server.robot_fields import InflationCache, RobotFields
 from services.edge_server.robot_views import robot_grid
 from services.edge_server.rrt import rrt_frontier_mask
-from services.edge_server.spatial_frontiers import detect_spatial_frontiers, subset
+from services.edge_server.spatial_frontiers import (
+    detect_spatial_frontiers,
+    grid_as_unexplored,
+    subset,
+)
 from services.edge_server.submap_store import SubmapStore
 
 if TYPE_CHECKING:
@@ -72,6 +76,8 @@ def robot_fields(
     fields.compute(fields.robots)
     return {robot: fields[robot] for robot in fields.robots}
 
+
+SPACE_PLANNERS = ("space", "space-paper")
 
 def frontiers_message(tick: int, fs: FrontierSet, complete: bool, assigned: dict[int, int],
                       resolution_m: float) -> Frontiers:
@@ -187,7 +193,7 @@ class EdgePlanner:
     ) -> FrontierSet:
         """Frontier regions of the configured planner, with goals among `reachable` cells."""
         cfg, spec = self.config, snap.spec
-        if cfg.planner in ("space", "space-paper"):
+        if cfg.planner in SPACE_PLANNERS:
             fs, _ = detect_spatial_frontiers(self.merged, snap.known, reachable, spec, cfg,
                                              self._point_frontiers(), goal_edt)
             # F_w regions already seen from close by are not worth a trip (completion.py)
@@ -213,6 +219,14 @@ class EdgePlanner:
             mask = ndimage.binary_dilation(mask, np.ones((2 * link + 1,) * 2, bool)) & ~snap.known
             return frontier_set(mask, reachable, spec, 1, cfg.goal_max_offset_m, goal_edt)
         return detect_frontiers(snap.free, snap.known, reachable, spec, cfg, goal_edt)
+
+    def _fall_back_to_grid(self, fs: FrontierSet, fields: RobotFields, tick: int) -> bool:
+        """SPACE planners with `space_grid_fallback`: no 3D region is usable this plan."""
+        if not self.config.space_grid_fallback or self.config.planner not in SPACE_PLANNERS:
+            return False
+        goal_rc = fs.goal_rc
+        usable = self.book.allowed(fs, tick) & fields.reachable[goal_rc[:, 0], goal_rc[:, 1]]
+        return not usable.any()
 
     def _kept_rrt_points(self, known: np.ndarray, spec: GridSpec,
                          origin_yx: np.ndarray) -> np.ndarray:
@@ -245,8 +259,11 @@ class EdgePlanner:
         starts = dict(zip(robots, spec.cell_of(robot_xy), strict=True))
         fields = RobotFields(traversable, starts, self.config.start_snap_m / spec.resolution_m)
         reachable = fields.reachable
-        fs = self._frontiers(tick, snap, traversable, reachable, fields, robot_xy,
-                             goal_transform(self.book.goal_cells(reachable, spec)))
+        goal_edt = goal_transform(self.book.goal_cells(reachable, spec))
+        fs = self._frontiers(tick, snap, traversable, reachable, fields, robot_xy, goal_edt)
+        if self._fall_back_to_grid(fs, fields, tick):
+            fs = grid_as_unexplored(detect_frontiers(snap.free, snap.known, reachable, spec,
+                                                     self.config, goal_edt))
         poses = np.array([[self.poses[r].x, self.poses[r].y, self.poses[r].yaw] for r in robots])
         result = self.book.plan(tick, robots, fields, fs, spec, self.scorer, poses)
         complete = self.judge.update(tick, result.assignable, int(snap.known.sum()))

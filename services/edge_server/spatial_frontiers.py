@@ -11,6 +11,8 @@ low-density forever; it is not an unexplored region a robot can go and see).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from scipy import ndimage
 
@@ -124,3 +126,11 @@ def _typed_empty(spec: GridSpec) -> FrontierSet:
     z = np.zeros(0)
     return FrontierSet(e.labels, e.sizes, e.centroid_xy, e.anchor_rc, e.anchor_xy, e.goal_rc,
                        e.goal_xy, 0, np.zeros(0, bool), z, z, z)
+
+
+def grid_as_unexplored(fs: FrontierSet) -> FrontierSet:
+    """2D grid frontier clusters as F_u regions for the SPACE scorers: unit gain and
+    importance (they only ever compete among themselves), at floor height."""
+    n = len(fs)
+    return replace(fs, weak=np.zeros(n, bool), gain=np.ones(n), importance=np.ones(n),
+                   centroid_z=np.zeros(n))
