@@ -142,3 +142,25 @@ def test_closed_room_completes_and_open_one_does_not() -> None:
     open_room = corridor_planner()
     open_room.on_pose(pose(0, 1.0))
     assert not any(open_room.plan(t).frontiers.complete for t in range(10, 80, 10))
+
+
+def test_space_falls_back_to_grid_frontiers_instead_of_completing() -> None:
+    """Free floor (its whole rim unknown) but no 3D region (no voxels): without the fallback
+    the SPACE planner assigns nothing and completes; with it the grid's frontier is a goal."""
+    def planner_for(fallback: bool) -> EdgePlanner:
+        p = EdgePlanner(EdgeConfig(planner="space", space_grid_fallback=fallback), tick_s=0.1)
+        cols, rows = np.meshgrid(np.arange(0, 80), np.arange(20, 30))
+        free = np.stack([cols.ravel(), rows.ravel()], axis=1)
+        p.on_submap(make_submap(0, 0, 0, 1, np.eye(4), np.zeros((0, 3)), free))
+        p.on_pose(pose(0, 0.5))
+        return p
+
+    plain = planner_for(False)
+    outs = [plain.plan(10 * k) for k in range(1, 5)]
+    assert not outs[0].goals and not outs[0].frontiers.frontiers
+    assert outs[-1].frontiers.complete
+    fallback = planner_for(True)
+    out = fallback.plan(10)
+    assert [(g.robot_id, g.frontier_class) for g in out.goals] == [(0, "unexplored")]
+    assert [f.size for f in out.frontiers.frontiers] == [176]  # the rim of the free floor
+    assert not any(fallback.plan(10 * k).frontiers.complete for k in range(2, 5))
