@@ -164,3 +164,13 @@ def test_space_falls_back_to_grid_frontiers_instead_of_completing() -> None:
     assert [(g.robot_id, g.frontier_class) for g in out.goals] == [(0, "unexplored")]
     assert [f.size for f in out.frontiers.frontiers] == [176]  # the rim of the free floor
     assert not any(fallback.plan(10 * k).frontiers.complete for k in range(2, 5))
+
+
+def test_grid_fallback_ignores_frontiers_shorter_than_its_minimum() -> None:
+    p = EdgePlanner(EdgeConfig(planner="space", space_grid_fallback=True,
+                               space_grid_fallback_min_cells=200), tick_s=0.1)
+    cols, rows = np.meshgrid(np.arange(0, 80), np.arange(20, 30))
+    p.on_submap(make_submap(0, 0, 0, 1, np.eye(4), np.zeros((0, 3)),
+                            np.stack([cols.ravel(), rows.ravel()], axis=1)))
+    p.on_pose(pose(0, 0.5))
+    assert not p.plan(10).goals  # the 176-cell rim is under 200

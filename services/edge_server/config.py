@@ -78,6 +78,10 @@ class EdgeConfig(BaseModel):
         "reachable), assign the 2D grid's free/unknown frontiers instead of counting the plan "
         "toward completion: an AWS-house mission ended at 59.7 % 3D coverage with a whole room "
         "unknown on the grid and no F_u region there")
+    space_grid_fallback_min_cells: int = Field(
+        default=5, ge=1, description="... only grid frontier clusters this long (cells): "
+        "the unknown room of that mission had a frontier of metres, most rims left at a "
+        "normal completion are short")
     nav_v_mps: float = Field(default=0.5, gt=0, description="the agents' max_v_mps (the "
                              "mission config copies it)")
     nav_omega_radps: float = Field(default=0.7853981633974483, gt=0,

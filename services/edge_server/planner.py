@@ -262,8 +262,10 @@ class EdgePlanner:
         goal_edt = goal_transform(self.book.goal_cells(reachable, spec))
         fs = self._frontiers(tick, snap, traversable, reachable, fields, robot_xy, goal_edt)
         if self._fall_back_to_grid(fs, fields, tick):
+            fallback = self.config.model_copy(
+                update={"frontier_min_cells": self.config.space_grid_fallback_min_cells})
             fs = grid_as_unexplored(detect_frontiers(snap.free, snap.known, reachable, spec,
-                                                     self.config, goal_edt))
+                                                     fallback, goal_edt))
         poses = np.array([[self.poses[r].x, self.poses[r].y, self.poses[r].yaw] for r in robots])
         result = self.book.plan(tick, robots, fields, fs, spec, self.scorer, poses)
         complete = self.judge.update(tick, result.assignable, int(snap.known.sum()))
