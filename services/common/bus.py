@@ -303,14 +303,19 @@ class Bus:
         raise TimeoutError(f"no reply on {key} within {timeout} s")
 
     def close(self) -> None:
-        if self.dropped:  # the count behind the log-once warnings, for the record
-            log.warning("dropped %d bad messages in all: %s", self.dropped.total(),
-                        json.dumps(dict(sorted(self.dropped.items()))))
         for handle in reversed(self._handles):
             undeclare = getattr(handle, "undeclare", None)
             if undeclare is not None:
                 undeclare()
         self._handles.clear()
+        # what arrived but was never polled is validated too, so every bad message is counted
+        # (a process stopped while busy would otherwise under-report)
+        left = sum(1 for _ in self.drain())
+        if left:
+            log.info("%d valid inbound messages left unhandled at exit", left)
+        if self.dropped:  # the count behind the log-once warnings, for the record
+            log.warning("dropped %d bad messages in all: %s", self.dropped.total(),
+                        json.dumps(dict(sorted(self.dropped.items()))))
 
 
 @contextmanager
