@@ -100,6 +100,14 @@ class AgentConfig(BaseModel):
     reg_scan_sigma_rad: float = Field(
         default=0.0025, gt=0, description="with reg_scan_heading: σ of that heading change per "
         "frame, rad")
+    reg_wall_heading: bool = Field(
+        default=False, description="an absolute heading from the directions of the walls in "
+        "each frame, modulo 90°, against the world's direction learned from the first frames "
+        "(wall_heading.py; needs the filter fusion)")
+    reg_wall_min_points: int = Field(
+        default=100, ge=10, description="with reg_wall_heading: wall points a frame needs")
+    reg_wall_sigma_rad: float = Field(
+        default=0.0035, gt=0, description="with reg_wall_heading: σ of a frame's heading, rad")
     reg_use_unconverged: bool = Field(
         default=False, description="GICP's pose on a frame it did not converge on (15 "
         "iterations) is fused by the filter like a converged one; false: the frame keeps the "

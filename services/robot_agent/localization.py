@@ -39,6 +39,7 @@ from services.robot_agent.odometry_calibration import (
 )
 from services.robot_agent.scan_odometry import ScanOdometry, ScanOdometryParams
 from services.robot_agent.voxel_map import LazyLruVoxelMap
+from services.robot_agent.wall_heading import WallHeading, WallHeadingParams
 
 
 @dataclass(frozen=True)
@@ -90,6 +91,8 @@ class RegistrationParams:
     # with the filter: the heading change since the previous frame from the two frames
     # registered to each other (scan_odometry.py) replaces odometry's (None = odometry's)
     scan_odometry: ScanOdometryParams | None = None
+    # with the filter: an absolute heading from the frame's wall directions (wall_heading.py)
+    wall_heading: WallHeadingParams | None = None
 
 
 @dataclass(frozen=True)
@@ -276,6 +279,8 @@ class Localizer:
         self.scans = (ScanOdometry(params.scan_odometry)
                       if params.scan_odometry is not None and params.filter is not None
                       else None)
+        self.walls = (WallHeading(params.wall_heading)
+                      if params.wall_heading is not None and params.filter is not None else None)
 
     def observe_odometry(self, T_odom_raw: np.ndarray) -> None:
         """Integrate one raw odometry pose into the corrected chain (every tick)."""
@@ -313,6 +318,8 @@ class Localizer:
         elif self.scans is not None and frame is not None:
             self.scans.turn(*frame, T_odom_base)  # the first frame: remembered only
         guess = self.T_loc_odom @ T_odom_base
+        if self.walls is not None and frame is not None:
+            guess = self._wall_heading(frame[0], guess, T_odom_base)
         self._T_odom_prev = T_odom_base.copy()
         if hidden:
             outcome = RegistrationOutcome(guess, False, "hidden by teammates")
@@ -324,6 +331,15 @@ class Localizer:
         # planar() re-orthonormalises, so rounding cannot pile up over thousands of frames
         self.T_loc_odom = planar(outcome.T_loc_base @ invert(T_odom_base))
         return outcome
+
+    def _wall_heading(self, cloud: small_gicp.PointCloud, guess: np.ndarray,
+                      T_odom_base: np.ndarray) -> np.ndarray:
+        """The guess after the heading the frame's walls give; T_loc_odom takes it up."""
+        xyyaw, self.P = self.walls.update(np.array(xyyaw_from_T(guess)), self.P,
+                                          cloud.points()[:, :3], np.asarray(cloud.covs()))
+        guess = T_from_xyyaw(*xyyaw)
+        self.T_loc_odom = planar(guess @ invert(T_odom_base))
+        return guess
 
     def _scan_turn(self, frame: tuple[small_gicp.PointCloud, small_gicp.KdTree] | None,
                    T_odom_base: np.ndarray, filt: FilterParams,

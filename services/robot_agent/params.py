@@ -10,6 +10,7 @@ from services.robot_agent.drift_filter import FilterParams
 from services.robot_agent.localization import RegistrationParams
 from services.robot_agent.odometry_calibration import CalibrationParams
 from services.robot_agent.scan_odometry import ScanOdometryParams
+from services.robot_agent.wall_heading import WallHeadingParams
 
 if TYPE_CHECKING:
     from services.robot_agent.keyframe_graph import LoopParams
@@ -36,6 +37,9 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
         if cfg.odom_calibration else None,
         scan_odometry=ScanOdometryParams(sigma_rad=cfg.reg_scan_sigma_rad)
         if cfg.reg_scan_heading else None,
+        wall_heading=WallHeadingParams(min_points=cfg.reg_wall_min_points,
+                                       sigma_rad=cfg.reg_wall_sigma_rad)
+        if cfg.reg_wall_heading else None,
     )
 
 

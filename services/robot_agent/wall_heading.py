@@ -1,0 +1,204 @@
+"""Absolute heading from the directions of the walls a frame sees (a Manhattan-frame prior).
+
+Every other heading source the agent has is relative: wheel odometry and scan-to-scan turns
+accumulate error, and registration against the robot's own map carries whatever error the map
+was built with. The failures that remain (docs/agent.md, "Ten seeds") are a slow yaw creep of
+0.5-1° while the robot turns into half-seen ground, each registration agreeing with the last.
+Indoors, most wall area runs along a few directions; once the robot has learned them (from its
+first frames, where its pose is known), a frame's walls give its heading modulo 90° directly,
+with no history to inherit an error from (the drift-free rotation of Manhattan-frame visual
+odometry: Kim et al., "Linear RGB-D SLAM for planar environments", ECCV 2018).
+
+Per frame: each downsampled point's covariance (small_gicp's, 10 neighbours) restricted to the
+floor plane is a line along a vertical surface when its smaller eigenvalue is a small share of
+the larger; its direction θ (base frame) is folded modulo 90° (e^{4iθ}). The frame's direction
+is their circular mean, refined over the points within `select_rad` of it. On recorded frames
+of three worlds (bench/bench_wall_heading.py) the error against the truth is 0.02-0.1° median,
+0.06-0.38° p90, with rare 1-5° outliers in frames of few wall points, which the filter's χ²
+gate and `min_points` keep out.
+
+Pure: numpy in, numpy out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from services.common.geometry import wrap_angle
+
+QUARTER = np.pi / 2
+
+
+@dataclass(frozen=True)
+class WallHeadingParams:
+    max_linearity: float = 0.15  # smaller / larger eigenvalue of a wall point's xy covariance
+    min_vertical: float = 0.3  # its z variance over the larger xy one: a vertical surface
+    min_z_m: float = 0.1  # points below are floor and skirting
+    select_rad: float = np.radians(3.0)  # points this close to the frame's direction refine it
+    min_points: int = 100  # wall points needed for a measurement
+    # refinement by straight wall segments: points within `family_rad` of a direction (or its
+    # perpendicular), split where their offsets along the normal jump by over `gap_m`
+    family_rad: float = np.radians(4.0)
+    gap_m: float = 0.03
+    segment_min_points: int = 15
+    segment_min_length_m: float = 0.5
+    segment_max_rms_m: float = 0.01  # straighter than this, or it is not one wall
+    min_segments: int = 1
+    # the segments' direction is kept only this close to the points' own: where they differ,
+    # one long straight thing that is not a wall (a bed, a rotated cabinet) decides the lines
+    agree_with_points_rad: float = np.radians(0.3)
+    sigma_rad: float = np.radians(0.2)  # σ of a frame's heading (rotated furniture, 0.1-0.6°
+    # in the AWS house, dominates some frames)
+    chi2_gate: float = 10.83  # 1 dof, p = 0.999
+    # the world's direction is learned from the first `learn_frames` frames, each weighted by
+    # 1 / (σ² + the filter's yaw variance): the start pose is known, and the first turn's
+    # frames count for less as odometry loses the turn
+    learn_frames: int = 20
+    learn_max_sigma_rad: float = np.radians(1.0)
+
+
+@dataclass(frozen=True)
+class WallDirection:
+    angle_rad: float  # the walls' direction in the base frame, in [−45°, 45°)
+    sigma_rad: float
+    n_points: int
+
+
+def fold(angle: np.ndarray | float) -> np.ndarray | float:
+    """An angle modulo 90°, in [−45°, 45°)."""
+    return wrap_angle(4.0 * np.asarray(angle)) / 4.0
+
+
+def wall_direction(points_base: np.ndarray, covs: np.ndarray,
+                   params: WallHeadingParams) -> WallDirection | None:
+    """The dominant wall direction (mod 90°) of one frame: points (N, 3) and their 3×3
+    covariances (N, 3, 3), base frame; None when too few points lie on vertical surfaces."""
+    cxx, cyy, cxy = covs[:, 0, 0], covs[:, 1, 1], covs[:, 0, 1]
+    half_tr = 0.5 * (cxx + cyy)
+    disc = np.sqrt(np.maximum(half_tr**2 - (cxx * cyy - cxy**2), 0.0))
+    large, small = half_tr + disc, half_tr - disc
+    wall = ((small < params.max_linearity * large) & (covs[:, 2, 2] > params.min_vertical * large)
+            & (points_base[:, 2] > params.min_z_m))
+    if np.count_nonzero(wall) < params.min_points:
+        return None
+    theta = 0.5 * np.arctan2(2.0 * cxy[wall], cxx[wall] - cyy[wall])  # the line's direction
+    mean = float(np.angle(np.exp(4j * theta).sum()) / 4.0)
+    dev = fold(theta - mean)
+    near = np.abs(dev) < params.select_rad
+    n = int(np.count_nonzero(near))
+    if n < params.min_points:
+        return None
+    coarse = float(fold(mean + float(np.angle(np.exp(4j * dev[near]).sum()) / 4.0)))
+    xy = points_base[wall, :2]
+    refined = _segments_direction(xy, theta, coarse, params)
+    if refined is None:
+        return None
+    refined = _segments_direction(xy, theta, refined, params)  # regrouped around the better one
+    if refined is None or abs(float(fold(refined - coarse))) > params.agree_with_points_rad:
+        return None
+    return WallDirection(float(fold(refined)), params.sigma_rad, n)
+
+
+def _segments_direction(xy: np.ndarray, theta: np.ndarray, direction: float,
+                        params: WallHeadingParams) -> float | None:
+    """`direction` refined by the straight wall segments along it and its perpendicular: a
+    point's covariance gives its line to a few tenths of a degree, a 2 m segment's points to a
+    hundredth (house frames: 0.005° median error against 0.05°). The segments' slopes are
+    combined by their weighted median."""
+    slopes, weights = [], []
+    for axis in (direction, direction + QUARTER):
+        member = np.abs(wrap_angle(2.0 * (theta - axis)) / 2.0) < params.family_rad
+        if np.count_nonzero(member) < params.segment_min_points:
+            continue
+        c, s = np.cos(axis), np.sin(axis)
+        along = c * xy[member, 0] + s * xy[member, 1]
+        across = -s * xy[member, 0] + c * xy[member, 1]
+        order = np.argsort(across)
+        along, across = along[order], across[order]
+        cuts = np.flatnonzero(np.diff(across) > params.gap_m) + 1
+        for u, v in zip(np.split(along, cuts), np.split(across, cuts), strict=True):
+            if len(u) < params.segment_min_points or np.ptp(u) < params.segment_min_length_m:
+                continue
+            du, dv = u - u.mean(), v - v.mean()
+            suu = float(du @ du)
+            slope = float(du @ dv) / suu
+            rms = float(np.sqrt(np.mean((dv - slope * du) ** 2)))
+            if rms > params.segment_max_rms_m:
+                continue
+            slopes.append(slope)
+            weights.append(suu / max(rms, 0.003) ** 2)
+    if len(slopes) < params.min_segments:
+        return None
+    slope_arr, w = np.array(slopes), np.array(weights)
+    order = np.argsort(slope_arr)
+    cum = np.cumsum(w[order])
+    return direction + float(slope_arr[order][np.searchsorted(cum, 0.5 * cum[-1])])
+
+
+def heading_from(direction: WallDirection, world_rad: float, yaw_pred: float) -> float:
+    """The heading the walls give: the world's wall direction minus the frame's, on the
+    branch (of four, 90° apart) nearest the predicted heading."""
+    return float(yaw_pred + fold(world_rad - direction.angle_rad - yaw_pred))
+
+
+@dataclass(frozen=True)
+class HeadingFusion:
+    xyyaw: np.ndarray  # (3,) loc frame
+    P: np.ndarray  # (3, 3)
+    mahalanobis2: float
+    accepted: bool
+
+
+def fuse_heading(xyyaw: np.ndarray, P: np.ndarray, yaw_meas: float, sigma_rad: float,
+                 chi2_gate: float) -> HeadingFusion:
+    """Kalman update of (x, y, yaw) with a heading measurement: position moves too, by how
+    its error correlates with the heading's (a turn's error swings the path after it)."""
+    innovation = float(wrap_angle(yaw_meas - xyyaw[2]))
+    s = float(P[2, 2]) + sigma_rad**2
+    d2 = innovation**2 / s
+    if d2 > chi2_gate:
+        return HeadingFusion(np.asarray(xyyaw, float), P, d2, False)
+    k = P[:, 2] / s
+    out = np.asarray(xyyaw, float) + k * innovation
+    out[2] = wrap_angle(out[2])
+    I_K = np.eye(3) - np.outer(k, [0.0, 0.0, 1.0])
+    P_new = I_K @ P @ I_K.T + np.outer(k, k) * sigma_rad**2  # Joseph form
+    return HeadingFusion(out, P_new, d2, True)
+
+
+class WallHeading:
+    """The world's wall direction, learned while the pose is known, then a heading each frame."""
+
+    def __init__(self, params: WallHeadingParams) -> None:
+        self.params = params
+        self.world_rad: float | None = None
+        self._learned = 0j  # Σ e^{4i·direction} / σ² over the frames learned from
+        self.n_frames = 0
+        self.n_fused = 0
+        self.n_rejected = 0
+
+    def update(self, xyyaw: np.ndarray, P: np.ndarray, points_base: np.ndarray,
+               covs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(x, y, yaw) and P after this frame's walls (unchanged when they say nothing)."""
+        self.n_frames += 1
+        direction = wall_direction(points_base, covs, self.params)
+        if direction is None:
+            return xyyaw, P
+        if self.n_frames <= self.params.learn_frames:
+            var = max(float(P[2, 2]), 0.0)
+            if var <= self.params.learn_max_sigma_rad**2:
+                self._learned += np.exp(4j * (xyyaw[2] + direction.angle_rad)) / (
+                    direction.sigma_rad**2 + var)
+                self.world_rad = float(np.angle(self._learned) / 4.0)
+            return xyyaw, P
+        if self.world_rad is None:
+            return xyyaw, P
+        yaw = heading_from(direction, self.world_rad, float(xyyaw[2]))
+        fusion = fuse_heading(xyyaw, P, yaw, direction.sigma_rad, self.params.chi2_gate)
+        if fusion.accepted:
+            self.n_fused += 1
+        else:
+            self.n_rejected += 1
+        return fusion.xyyaw, fusion.P
