@@ -8,11 +8,8 @@ import numpy as np
 import small_gicp
 
 from services.common.geometry import T_from_xyyaw, invert, transform_points, xyyaw_from_T
-from services.robot_agent.localization import (
-    Localizer,
-    RegistrationParams,
-    drop_weak_translation,
-)
+from services.robot_agent.drift_filter import drop_weak_translation
+from services.robot_agent.localization import Localizer, RegistrationParams
 
 
 def _wall(x0: float, y0: float, x1: float, y1: float, rng: np.random.Generator) -> np.ndarray:

@@ -101,7 +101,7 @@ class AgentConfig(BaseModel):
         default=0.0025, gt=0, description="with reg_scan_heading: σ of that heading change per "
         "frame, rad")
     reg_wall_heading: bool = Field(
-        default=False, description="an absolute heading from the directions of the walls in "
+        default=True, description="an absolute heading from the directions of the walls in "
         "each frame, modulo 90°, against the world's direction learned from the first frames "
         "(wall_heading.py; needs the filter fusion)")
     reg_wall_min_points: int = Field(

@@ -190,3 +190,24 @@ def _relative(xyyaw_from: np.ndarray, xyyaw_to: np.ndarray) -> tuple[float, floa
     c, s = np.cos(xyyaw_from[2]), np.sin(xyyaw_from[2])
     wx, wy = xyyaw_to[0] - xyyaw_from[0], xyyaw_to[1] - xyyaw_from[1]
     return c * wx + s * wy, -s * wx + c * wy, float(wrap_angle(xyyaw_to[2] - xyyaw_from[2]))
+
+
+def drop_weak_translation(step: np.ndarray, H6: np.ndarray, ratio: float) -> np.ndarray:
+    """The (dx, dy, dyaw) body-frame step without its part along a degenerate direction.
+
+    GICP's Hessian (small_gicp orders rx, ry, rz, tx, ty, tz; body-frame perturbation) gives
+    the translation information once yaw is marginalised out (Schur complement). Between shelf
+    rows or along one wall it is a hundred times weaker along the aisle than across it, and
+    GICP then walks the pose along the aisle by ~2 cm a frame; odometry is the better guess
+    there (solution remapping, Zhang et al. ICRA 2016)."""
+    H = np.asarray(H6)[np.ix_([3, 4, 2], [3, 4, 2])]
+    if H[2, 2] <= 0:
+        return step
+    Ht = H[:2, :2] - np.outer(H[:2, 2], H[2, :2]) / H[2, 2]
+    w, V = np.linalg.eigh(0.5 * (Ht + Ht.T))
+    if w[1] <= 0 or w[0] >= ratio * w[1]:
+        return step
+    weak = V[:, 0]
+    out = step.copy()
+    out[:2] -= weak * float(weak @ step[:2])
+    return out

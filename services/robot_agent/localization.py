@@ -27,6 +27,7 @@ from services.common.geometry import T_from_xyyaw, invert, wrap_angle, xyyaw_fro
 from services.robot_agent.drift_filter import (
     FilterParams,
     agree,
+    drop_weak_translation,
     fuse,
     measurement_cov,
     overlap_inflation,
@@ -236,27 +237,6 @@ class FrameRegistrar:
             T = guess @ T_from_xyyaw(*drop_weak_translation(
                 np.array([dx, dy, dyaw]), res.H, p.degenerate_ratio))
         return RegistrationOutcome(T, True)
-
-
-def drop_weak_translation(step: np.ndarray, H6: np.ndarray, ratio: float) -> np.ndarray:
-    """The (dx, dy, dyaw) body-frame step without its part along a degenerate direction.
-
-    GICP's Hessian (small_gicp orders rx, ry, rz, tx, ty, tz; body-frame perturbation) gives
-    the translation information once yaw is marginalised out (Schur complement). Between shelf
-    rows or along one wall it is a hundred times weaker along the aisle than across it, and
-    GICP then walks the pose along the aisle by ~2 cm a frame; odometry is the better guess
-    there (solution remapping, Zhang et al. ICRA 2016)."""
-    H = np.asarray(H6)[np.ix_([3, 4, 2], [3, 4, 2])]
-    if H[2, 2] <= 0:
-        return step
-    Ht = H[:2, :2] - np.outer(H[:2, 2], H[2, :2]) / H[2, 2]
-    w, V = np.linalg.eigh(0.5 * (Ht + Ht.T))
-    if w[1] <= 0 or w[0] >= ratio * w[1]:
-        return step
-    weak = V[:, 0]
-    out = step.copy()
-    out[:2] -= weak * float(weak @ step[:2])
-    return out
 
 
 class Localizer:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import logging
 import threading
 
+import numpy as np
+
 from schemas.messages import (
     Correction,
     Goal,
@@ -90,6 +92,13 @@ def handle(
                 cal = core.localizer.odometry.calibration
                 log.info("robot %d tick %d: odometry errors %s from %d segments (%d left out)",
                          core.robot_id, msg.tick, cal.errors, cal.n_used, cal.n_rejected)
+            walls = core.localizer.walls
+            if walls is not None:
+                log.info("robot %d tick %d: wall heading: world direction %s, %d fused, "
+                         "%d rejected", core.robot_id, msg.tick,
+                         "unknown" if walls.world_rad is None
+                         else f"{np.degrees(walls.world_rad):+.2f}°",
+                         walls.n_fused, walls.n_rejected)
 
 
 def _apply(core: AgentCore, msg: Message) -> None:
