@@ -17,8 +17,13 @@ import numpy as np  # noqa: E402
 
 from schemas import encode  # noqa: E402
 from schemas.messages import Goal, Odometry, Pose2D, RgbdFrame  # noqa: E402
-from services.common.geometry import T_from_xyyaw, invert, transform_points  # noqa: E402
-from services.robot_agent.agent import AgentCore, _xy_in  # noqa: E402
+from services.common.geometry import (  # noqa: E402
+    T_from_xyyaw,
+    invert,
+    transform_points,
+    transform_xy,  # noqa: E402
+)
+from services.robot_agent.agent import AgentCore  # noqa: E402
 from services.robot_agent.config import AgentConfig  # noqa: E402
 from services.robot_agent.local_grid import floor_rays  # noqa: E402
 from services.robot_agent.projection import (  # noqa: E402
@@ -80,9 +85,10 @@ def stage_times(core: AgentCore, frame: RgbdFrame, pose: tuple[float, float, flo
     free_base = floor_rays(points_base, frame.T_base_cam[:2, 3], cfg.obstacle_z_min_m,
                            cfg.obstacle_z_max_m, cfg.cell_m, cfg.ray_bin_rad)
     floor = points_base[:, 2] <= cfg.obstacle_z_min_m
-    core.mapper.current.add_free(_xy_in(T_submap_base, free_base), cfg.cell_m)
+    core.mapper.current.add_free(transform_xy(T_submap_base, free_base), cfg.cell_m)
     band = ~floor & (points_base[:, 2] <= cfg.obstacle_z_max_m)
-    core.grid.update(_xy_in(T_odom_base, free_base), _xy_in(T_odom_base, points_base[band, :2]))
+    core.grid.update(transform_xy(T_odom_base, free_base),
+                     transform_xy(T_odom_base, points_base[band, :2]))
     t["free rays + grid"] = time.perf_counter() - t0
     return t
 

@@ -31,11 +31,12 @@ import numpy as np  # noqa: E402
 
 from schemas import encode  # noqa: E402
 from schemas.messages import Odometry, Pose2D, RgbdFrame, RobotPose, Submap  # noqa: E402
-from services.robot_agent.agent import AgentCore, hfov_of  # noqa: E402
+from services.robot_agent.agent import AgentCore  # noqa: E402
 from services.robot_agent.awareness import in_view_partial, visible_paper  # noqa: E402
 from services.robot_agent.config import AgentConfig  # noqa: E402
 from services.robot_agent.drf import filter_mask  # noqa: E402
 from services.robot_agent.params import drf_params  # noqa: E402
+from services.robot_agent.projection import hfov_of  # noqa: E402
 from services.simulator.config import SimConfig  # noqa: E402
 from services.simulator.core import Simulation  # noqa: E402
 

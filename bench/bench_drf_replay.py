@@ -30,11 +30,11 @@ from bench_localization import load_or_record  # noqa: E402
 
 from schemas.messages import Pose2D, RobotPose  # noqa: E402
 from services.evaluator import run_files as rf  # noqa: E402
-from services.robot_agent.agent import hfov_of  # noqa: E402
 from services.robot_agent.awareness import in_view_partial  # noqa: E402
 from services.robot_agent.config import AgentConfig  # noqa: E402
 from services.robot_agent.drf import filter_mask  # noqa: E402
 from services.robot_agent.params import drf_params  # noqa: E402
+from services.robot_agent.projection import hfov_of  # noqa: E402
 from services.robot_agent.teammates import predict_xy  # noqa: E402
 
 log = logging.getLogger("bench_drf_replay")

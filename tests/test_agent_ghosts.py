@@ -14,6 +14,7 @@ from services.robot_agent.synthetic import T_world_cam_of, render
 from services.robot_agent.teammates import predict_xy
 from tests.test_agent_core import _frame, _odom
 from tests.test_agent_drf import ROOM, T_BASE_CAM, K, _robot_box
+from tests.test_agent_yield import yield_command
 
 
 def _pose(rid: int, k: int, x: float, y: float) -> RobotPose:
@@ -119,11 +120,11 @@ def test_robot_does_not_drive_into_a_teammate_the_drf_hides() -> None:
 
     core = AgentCore(AgentConfig(), 0, 0.1, team_size=1)
     core.on_pose(_pose(1, 10, 0.5, 0.1))
-    ahead = core._yield_to_teammates((0.0, 0.0, 0.0), Command(0.3, 0.2), 11)
+    ahead = yield_command(core, (0.0, 0.0, 0.0), Command(0.3, 0.2), 11)
     assert ahead == Command(0.0, 0.2)
-    behind = core._yield_to_teammates((0.0, 0.0, math.pi), Command(0.3, 0.2), 11)
+    behind = yield_command(core, (0.0, 0.0, math.pi), Command(0.3, 0.2), 11)
     assert behind == Command(0.3, 0.2)
-    stale = core._yield_to_teammates((0.0, 0.0, 0.0), Command(0.3, 0.2), 100)
+    stale = yield_command(core, (0.0, 0.0, 0.0), Command(0.3, 0.2), 100)
     assert stale == Command(0.3, 0.2)
 
 

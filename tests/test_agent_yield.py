@@ -10,6 +10,13 @@ from services.robot_agent.navigation import Command
 N = 10  # yield_detour_ticks
 
 
+def yield_command(core: AgentCore, pose_world: tuple[float, float, float], cmd: Command,
+                  tick: int) -> Command:
+    """The agent's yield rule applied to `cmd` at `pose_world` with its teammates."""
+    return core.yields.command(cmd, pose_world, core.teammates, core.teammates_prev, core.nav,
+                               tick)
+
+
 def _core(robot_id: int, detour_ticks: int = N) -> AgentCore:
     core = AgentCore(AgentConfig(yield_detour_ticks=detour_ticks), robot_id, 0.1, team_size=1)
     return core
@@ -23,7 +30,7 @@ def _ahead(core: AgentCore, teammate: int, tick: int) -> None:
 def _ticks_until_detour(core: AgentCore, teammate: int, limit: int = 100) -> int | None:
     for tick in range(limit):
         _ahead(core, teammate, tick)
-        cmd = core._yield_to_teammates((0.0, 0.0, 0.0), Command(0.5, 0.1), tick)
+        cmd = yield_command(core, (0.0, 0.0, 0.0), Command(0.5, 0.1), tick)
         assert cmd == Command(0.0, 0.1)  # forward motion stopped, turning kept
         if core.nav.avoid_xy is not None:
             return tick
@@ -38,4 +45,4 @@ def test_the_higher_id_detours_first_the_lower_id_later() -> None:
 def test_no_detour_by_default_and_none_without_a_teammate_ahead() -> None:
     assert _ticks_until_detour(_core(robot_id=2, detour_ticks=0), teammate=1) is None
     core = _core(robot_id=2)
-    assert core._yield_to_teammates((0.0, 0.0, 3.14), Command(0.5, 0.0), 0) == Command(0.5, 0.0)
+    assert yield_command(core, (0.0, 0.0, 3.14), Command(0.5, 0.0), 0) == Command(0.5, 0.0)

@@ -31,6 +31,11 @@ def transform_points(T_to_from: np.ndarray, points_from: np.ndarray) -> np.ndarr
     return points_from @ T_to_from[:3, :3].T + T_to_from[:3, 3]
 
 
+def transform_xy(T_to_from: np.ndarray, xy_from: np.ndarray) -> np.ndarray:
+    """Planar part of a transform applied to (N, 2) points."""
+    return xy_from @ T_to_from[:2, :2].T + T_to_from[:2, 3]
+
+
 def invert(T: np.ndarray) -> np.ndarray:
     """Inverse of a rigid 4×4 transform."""
     Ti = np.eye(4)

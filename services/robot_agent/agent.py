@@ -35,20 +35,26 @@ from schemas.messages import (
     RobotPose,
     Submap,
 )
-from services.common.geometry import T_from_xyyaw, invert, transform_points, xyyaw_from_T
+from services.common.geometry import (
+    T_from_xyyaw,
+    invert,
+    transform_points,
+    transform_xy,
+    xyyaw_from_T,
+)
 from services.common.inventory import inventory_of
 from services.robot_agent.awareness import in_view_partial, visible_paper
 from services.robot_agent.config import AgentConfig
 from services.robot_agent.drf import filter_mask
-from services.robot_agent.exploration import local_frontier_goal
+from services.robot_agent.exploration import LOCAL_GOAL_BASE, LocalExplorer
 from services.robot_agent.local_grid import LocalGrid, floor_rays
 from services.robot_agent.local_map import KeyframeMapper, SubmapDelta
 from services.robot_agent.localization import Localizer
-from services.robot_agent.navigation import Command, Navigator, StatusEvent, inflation_cells
+from services.robot_agent.navigation import Command, Navigator, StatusEvent
 from services.robot_agent.params import drf_params, loop_params, registration_params
-from services.robot_agent.projection import cam_to_base, depth_to_points, pixel_colors
+from services.robot_agent.projection import cam_to_base, depth_to_points, hfov_of, pixel_colors
 from services.robot_agent.teammates import predict_xy
-from services.robot_agent.yielding import YieldRule, blocker_ahead, yielded
+from services.robot_agent.yielding import YieldRule
 
 if TYPE_CHECKING:
     from services.robot_agent.back_end import BackEnd
@@ -56,7 +62,6 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 SUBMAP_IDS_PER_EPOCH = 10_000
-LOCAL_GOAL_BASE = 1 << 30  # ids of the agent's own goals while the edge is away (never reported)
 
 
 @dataclass(frozen=True)
@@ -77,11 +82,6 @@ class DrfRecord:
     mask: np.ndarray  # (H, W) bool pixels removed
 
 
-def _xy_in(T_to_from: np.ndarray, xy_from: np.ndarray) -> np.ndarray:
-    """Planar transform of (N, 2) points."""
-    return xy_from @ T_to_from[:2, :2].T + T_to_from[:2, 3]
-
-
 def _back_end(config: AgentConfig, robot_id: int) -> BackEnd | None:
     """The keyframe pose graph when loop closure is on; imported only then, since it alone
     needs gtsam (0.3 s of CPU at every agent start otherwise)."""
@@ -90,11 +90,6 @@ def _back_end(config: AgentConfig, robot_id: int) -> BackEnd | None:
     from services.robot_agent.back_end import BackEnd
 
     return BackEnd(loop_params(config), robot_id)
-
-
-def hfov_of(K: np.ndarray, width: int) -> float:
-    """Horizontal field of view of a pinhole camera, rad."""
-    return 2.0 * math.atan2(width / 2.0, K[0, 0])
 
 
 class AgentCore:
@@ -128,8 +123,7 @@ class AgentCore:
         self.last_drf: DrfRecord | None = None
         self.edge_alive = True  # assumed until its liveliness token is seen to go
         self.resend_pending = False
-        self.local_goals = 0
-        self.local_goal_tick = -(10**9)
+        self.explorer = LocalExplorer(config, robot_id)
         self.seq = 0
 
     # -- inputs that only update state -------------------------------------------------------
@@ -231,7 +225,8 @@ class AgentCore:
             deltas += [delta] if delta is not None else []
         events = self._navigate_goal_inputs(pose_world, odom.tick)
         cmd, event = self.nav.step(pose_world, self.grid, odom.tick)
-        cmd = self._yield_to_teammates(pose_world, cmd, odom.tick)
+        cmd = self.yields.command(cmd, pose_world, self.teammates, self.teammates_prev, self.nav,
+                                  odom.tick)
         if self.nav.state == "idle" and self.view_hidden and \
                 not self.config.idle_spin_when_hidden:
             cmd = Command(0.0, 0.0)  # a turn no frame can register: hold still
@@ -255,20 +250,6 @@ class AgentCore:
             return self.T_world_loc
         return self.T_world_loc @ self.back_end.T_map_front()
 
-    def _yield_to_teammates(self, pose_world: tuple[float, float, float], cmd: Command,
-                            tick: int) -> Command:
-        """No forward motion into a teammate just ahead (yielding.py); a detour around it
-        when the wait is long."""
-        if cmd.v_mps <= 0.0:
-            return cmd
-        passing = self.yields.passing if self.nav.avoid_xy is not None else None
-        blocker = blocker_ahead(pose_world, self.teammates, self.teammates_prev, tick,
-                                self.config, passing)
-        if self.yields.detour_due(blocker, tick):
-            assert blocker is not None
-            self.nav.avoid(blocker.xy, tick)
-        return cmd if blocker is None else yielded(cmd)
-
     def _ensure_grid(self, pose_world: tuple[float, float, float]) -> None:
         if self.grid is None:
             self.grid = LocalGrid.centred(
@@ -284,32 +265,16 @@ class AgentCore:
             if self.nav.cancel(goal_id):
                 log.info("robot %d goal %d cancelled by the edge", self.robot_id, goal_id)
         self.cancels = []
-        if self.goal is None and self._wants_local_goal(tick):
-            self.goal = self._local_goal(pose_world, tick)
+        if self.goal is None and self.explorer.wants_goal(tick, self.edge_alive,
+                                                          self.nav.goal is not None):
+            assert self.grid is not None
+            self.goal = self.explorer.goal(self.grid, pose_world, tick)
         events: list[StatusEvent] = []
         if self.goal is not None:
             event = self.nav.set_goal(self.goal, tick)
             events += [event] if event is not None else []
             self.goal = None
         return events
-
-    def _wants_local_goal(self, tick: int) -> bool:
-        cfg = self.config
-        return (not self.edge_alive and cfg.local_explore and self.nav.goal is None
-                and tick - self.local_goal_tick >= cfg.local_goal_retry_ticks)
-
-    def _local_goal(self, pose_world: tuple[float, float, float], tick: int) -> Goal | None:
-        """The nearest frontier of the agent's own grid, as a goal only this agent knows."""
-        assert self.grid is not None
-        self.local_goal_tick = tick
-        radius = inflation_cells(self.config, self.grid.spec.resolution_m)
-        xy = local_frontier_goal(self.grid, np.array(pose_world[:2]), radius,
-                                 self.config.frontier_min_cells, 2 * self.config.goal_tolerance_m)
-        if xy is None:
-            return None
-        self.local_goals += 1
-        return Goal(robot_id=self.robot_id, tick=tick, goal_id=LOCAL_GOAL_BASE + self.local_goals,
-                    x=float(xy[0]), y=float(xy[1]), frontier_class="unexplored", revenue=0.0)
 
     # -- perception --------------------------------------------------------------------------
     def _teammates_in_view(self, pose_world: tuple[float, float, float], frame: RgbdFrame,
@@ -395,12 +360,12 @@ class AgentCore:
         self.mapper.integrate(
             transform_points(T_submap_base, points_base),
             pixel_colors(frame.rgb, cam),
-            _xy_in(T_submap_base, free_base),
+            transform_xy(T_submap_base, free_base),
         )
         band = ~floor & (points_base[:, 2] <= cfg.obstacle_z_max_m)
         assert self.grid is not None
-        occupied_world = _xy_in(T_world_base, points_base[band, :2])
-        self.grid.update(_xy_in(T_world_base, free_base), occupied_world)
+        occupied_world = transform_xy(T_world_base, points_base[band, :2])
+        self.grid.update(transform_xy(T_world_base, free_base), occupied_world)
         return out
 
     def _outputs(

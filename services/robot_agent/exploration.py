@@ -11,10 +11,14 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from schemas.messages import Goal
 from services.common.grid import GridSpec
 from services.common.planning import distance_field
+from services.robot_agent.config import AgentConfig
 from services.robot_agent.local_grid import FREE, UNKNOWN, LocalGrid
-from services.robot_agent.navigation import snap_cell, traversable_of
+from services.robot_agent.navigation import inflation_cells, snap_cell, traversable_of
+
+LOCAL_GOAL_BASE = 1 << 30  # ids of the agent's own goals while the edge is away (never reported)
 
 _MARGIN_CELLS = 4
 _EIGHT = np.ones((3, 3), bool)
@@ -72,3 +76,32 @@ def local_frontier_goal(
     goal = nearest_frontier(grid.cells(rows, cols), (int(rc[0]), int(rc[1])), radius_cells,
                             min_cells, min_dist_m / spec.resolution_m)
     return None if goal is None else sub.centre_of(np.array([goal]))[0]
+
+
+class LocalExplorer:
+    """The agent's own frontier goals while the edge is away, one try per retry interval."""
+
+    def __init__(self, config: AgentConfig, robot_id: int) -> None:
+        self.config = config
+        self.robot_id = robot_id
+        self.n_goals = 0
+        self.last_try_tick = -(10**9)
+
+    def wants_goal(self, tick: int, edge_alive: bool, navigating: bool) -> bool:
+        cfg = self.config
+        return (not edge_alive and cfg.local_explore and not navigating
+                and tick - self.last_try_tick >= cfg.local_goal_retry_ticks)
+
+    def goal(self, grid: LocalGrid, pose_world: tuple[float, float, float],
+             tick: int) -> Goal | None:
+        """The nearest frontier of the agent's own grid, as a goal only this agent knows."""
+        self.last_try_tick = tick
+        cfg = self.config
+        radius = inflation_cells(cfg, grid.spec.resolution_m)
+        xy = local_frontier_goal(grid, np.array(pose_world[:2]), radius, cfg.frontier_min_cells,
+                                 2 * cfg.goal_tolerance_m)
+        if xy is None:
+            return None
+        self.n_goals += 1
+        return Goal(robot_id=self.robot_id, tick=tick, goal_id=LOCAL_GOAL_BASE + self.n_goals,
+                    x=float(xy[0]), y=float(xy[1]), frontier_class="unexplored", revenue=0.0)

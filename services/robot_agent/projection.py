@@ -6,6 +6,7 @@ floor (z up), `world` the mission frame.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,6 +69,11 @@ def base_to_frame(points_base: np.ndarray, T_frame_base: np.ndarray) -> np.ndarr
 def pixel_colors(rgb: np.ndarray, cam_points: CameraPoints) -> np.ndarray:
     """(N, 3) uint8 colours of the pixels behind `cam_points`."""
     return np.asarray(rgb)[cam_points.rows, cam_points.cols]
+
+
+def hfov_of(K: np.ndarray, width: int) -> float:
+    """Horizontal field of view of a pinhole camera, rad."""
+    return 2.0 * math.atan2(width / 2.0, K[0, 0])
 
 
 def intrinsics(width: int, height: int, hfov_rad: float) -> np.ndarray:

@@ -17,7 +17,7 @@ import numpy as np
 
 from schemas.messages import RobotPose
 from services.robot_agent.config import AgentConfig
-from services.robot_agent.navigation import Command
+from services.robot_agent.navigation import Command, Navigator
 from services.robot_agent.teammates import predict_xy
 
 
@@ -74,6 +74,22 @@ class YieldRule:
         self.passing = blocker.robot_id
         self.since = (blocker.robot_id, tick)  # the next detour only after another wait
         return True
+
+
+    def command(self, cmd: Command, pose_world: tuple[float, float, float],
+                teammates: dict[int, RobotPose], teammates_prev: dict[int, RobotPose],
+                nav: Navigator, tick: int) -> Command:
+        """`cmd` without forward motion into a teammate just ahead; `nav` plans around it
+        when the wait is long."""
+        if cmd.v_mps <= 0.0:
+            return cmd
+        passing = self.passing if nav.avoid_xy is not None else None
+        blocker = blocker_ahead(pose_world, teammates, teammates_prev, tick, self.config,
+                                passing)
+        if self.detour_due(blocker, tick):
+            assert blocker is not None
+            nav.avoid(blocker.xy, tick)
+        return cmd if blocker is None else yielded(cmd)
 
 
 def yielded(cmd: Command) -> Command:
