@@ -108,6 +108,10 @@ class AgentConfig(BaseModel):
         default=100, ge=10, description="with reg_wall_heading: wall points a frame needs")
     reg_wall_sigma_rad: float = Field(
         default=0.0035, gt=0, description="with reg_wall_heading: σ of a frame's heading, rad")
+    reg_wall_learn_max_sigma_rad: float = Field(
+        default=0.017453292519943295, gt=0, description="with reg_wall_heading: the world's "
+        "wall direction is learned only from early frames whose filter yaw σ is at most this, "
+        "rad (1°)")
     reg_use_unconverged: bool = Field(
         default=False, description="GICP's pose on a frame it did not converge on (15 "
         "iterations) is fused by the filter like a converged one; false: the frame keeps the "

@@ -38,7 +38,8 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
         scan_odometry=ScanOdometryParams(sigma_rad=cfg.reg_scan_sigma_rad)
         if cfg.reg_scan_heading else None,
         wall_heading=WallHeadingParams(min_points=cfg.reg_wall_min_points,
-                                       sigma_rad=cfg.reg_wall_sigma_rad)
+                                       sigma_rad=cfg.reg_wall_sigma_rad,
+                                       learn_max_sigma_rad=cfg.reg_wall_learn_max_sigma_rad)
         if cfg.reg_wall_heading else None,
     )
 
