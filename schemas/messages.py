@@ -120,6 +120,11 @@ class RobotPose(Message):
     stamp_ns: StampNs
     pose_world: Pose2D
     state: str = Field(default="", max_length=32, description="navigation state, for display")
+    wall_direction_rad: float | None = Field(
+        default=None, ge=-np.pi / 4, le=np.pi / 4, allow_inf_nan=False,
+        description="the walls' direction this agent learned from its first frames, world "
+        "frame, modulo 90° in [−π/4, π/4]; None until it has learned one (teammates take the "
+        "consensus: services/robot_agent/wall_heading.py)")
 
 
 class Submap(Message):

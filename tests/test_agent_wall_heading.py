@@ -5,14 +5,20 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 import small_gicp
+from pydantic import ValidationError
 
+from schemas.messages import Pose2D, RobotPose
 from services.common.geometry import T_from_xyyaw, invert, transform_points
+from services.robot_agent.agent import AgentCore
+from services.robot_agent.config import AgentConfig
 from services.robot_agent.wall_heading import (
     WallHeading,
     WallHeadingParams,
     fold,
     fuse_heading,
+    team_direction,
     wall_direction,
 )
 from tests.test_agent_localization import _wall
@@ -105,3 +111,63 @@ def test_learned_at_the_start_the_walls_bring_a_lost_turn_back() -> None:
     kept, _ = walls.update(guess, np.diag([1e-4, 1e-4, math.radians(1.0) ** 2]),
                            *_frame(other, truth))
     assert np.all(kept == guess) and walls.n_rejected == 1
+
+
+def test_the_team_outvotes_a_robot_that_learned_the_walls_off() -> None:
+    """Warehouse, 24 robots: three learned the walls 0.5-1.3° off in the crowded start. The
+    median of the robots' directions ignores them; those near it are averaged; the robot's
+    own wins a tie; angles wrap at ±45°."""
+    deg = np.radians
+    team = [deg(x) for x in (-0.05, 0.03, 0.12, -0.18, 0.79, 0.49, 0.1)]
+    world = team_direction(deg(1.31), team, deg(0.3))
+    assert world is not None and abs(math.degrees(world) - 0.004) < 0.01
+    assert abs(team_direction(deg(1.0), [deg(0.0)], deg(0.3)) - deg(1.0)) < 1e-12
+    assert abs(math.degrees(team_direction(deg(0.1), [deg(0.0)], deg(0.3))) - 0.05) < 1e-9
+    wrapped = team_direction(deg(44.9), [deg(-44.9), deg(44.8)], deg(0.3))
+    assert abs(math.degrees(fold(wrapped - deg(44.933333))) ) < 1e-4
+    assert team_direction(None, [], deg(0.3)) is None
+    assert abs(team_direction(None, [deg(2.0)], deg(0.3)) - deg(2.0)) < 1e-12
+
+
+def test_a_robot_that_learned_off_takes_the_team_direction_and_its_heading_back() -> None:
+    """A robot whose odometry lost 1° before it learned holds its heading 1° off (its own
+    direction agrees with its error); its teammates' directions reveal the error: the world
+    direction moves to theirs, P grows by the change, and the next frame pulls the heading
+    to the truth instead of being rejected."""
+    rng = np.random.default_rng(5)
+    room = _rotated(_room(rng), 0.0)
+    walls = WallHeading(PARAMS)
+    truth = (0.0, 0.0, 0.0)
+    believed = np.array([0.0, 0.0, math.radians(1.0)])  # 1° off all through learning
+    P_small = np.diag([1e-6, 1e-6, math.radians(0.1) ** 2])
+    for _ in range(PARAMS.learn_frames):
+        walls.update(believed, P_small, *_frame(room, truth))
+    assert walls.own_rad is not None and abs(math.degrees(walls.own_rad) - 1.0) < 0.05
+    assert abs(math.degrees(walls.shared(math.radians(2.0))) - 3.0) < 0.05  # world frame
+    alone = WallHeading(PARAMS)  # no teammates: the 1° stays
+    alone._learned, alone.n_frames, alone.world_rad = walls._learned, walls.n_frames, \
+        walls.world_rad
+    kept, _ = alone.update(believed, P_small, *_frame(room, truth))
+    assert abs(math.degrees(kept[2]) - 1.0) < 0.05
+    for rid, direction_deg in ((1, 0.02), (2, -0.03)):
+        walls.receive(rid, math.radians(direction_deg + 2.0), math.radians(2.0))
+    xyyaw, P = walls.update(believed, P_small, *_frame(room, truth))
+    assert abs(math.degrees(walls.world_rad)) < 0.05
+    assert walls.n_rejected == 0 and abs(math.degrees(xyyaw[2])) < 0.1
+    assert P[2, 2] < math.radians(0.2) ** 2
+
+
+def test_teammates_directions_travel_with_their_poses() -> None:
+    """An agent keeps each teammate's learned direction from its pose messages (in its own
+    frame) and sends none of its own before it has learned one; the message bounds it."""
+    core = AgentCore(AgentConfig(), 0, 0.1, team_size=2)
+    pose = Pose2D(x=1.0, y=0.0, yaw=0.0)
+    core.on_pose(RobotPose(robot_id=1, tick=3, stamp_ns=3, pose_world=pose,
+                           wall_direction_rad=0.01))
+    core.on_pose(RobotPose(robot_id=2, tick=3, stamp_ns=3, pose_world=pose))
+    assert core.localizer.walls is not None and list(core.localizer.walls.team) == [1]
+    assert abs(core.localizer.walls.team[1] - 0.01) < 1e-12
+    assert core.localizer.walls.shared(0.0) is None
+    for bad in (1.0, float("nan")):
+        with pytest.raises(ValidationError):
+            RobotPose(robot_id=1, tick=3, stamp_ns=3, pose_world=pose, wall_direction_rad=bad)

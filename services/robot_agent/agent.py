@@ -152,6 +152,9 @@ class AgentCore:
     def on_pose(self, pose: RobotPose) -> None:
         if pose.robot_id == self.robot_id:
             return
+        if self.localizer.walls is not None:
+            self.localizer.walls.receive(pose.robot_id, pose.wall_direction_rad,
+                                         xyyaw_from_T(self.T_world_loc)[2])
         last = self.teammates.get(pose.robot_id)
         if last is not None and last.tick < pose.tick:
             self.teammates_prev[pose.robot_id] = last
@@ -376,6 +379,8 @@ class AgentCore:
         out = [Outgoing("pose", RobotPose(
             robot_id=rid, tick=tick, stamp_ns=odom.stamp_ns, pose_world=Pose2D(
                 x=pose_world[0], y=pose_world[1], yaw=pose_world[2]), state=self.nav.state,
+            wall_direction_rad=walls.shared(xyyaw_from_T(self.T_world_loc)[2])
+            if (walls := self.localizer.walls) is not None else None,
         ))]
         for delta in deltas:
             out.append(Outgoing("submap", self._submap_message(delta, tick, odom.stamp_ns)))

@@ -112,6 +112,10 @@ class AgentConfig(BaseModel):
         default=0.017453292519943295, gt=0, description="with reg_wall_heading: the world's "
         "wall direction is learned only from early frames whose filter yaw σ is at most this, "
         "rad (1°)")
+    reg_wall_team_inlier_rad: float = Field(
+        default=0.005235987755982988, ge=0, description="with reg_wall_heading: the world's "
+        "wall direction is the mean of the robots' learned ones within this of their median "
+        "(teammates' arrive with their poses), rad (0.3°); 0 = each robot its own")
     reg_use_unconverged: bool = Field(
         default=False, description="GICP's pose on a frame it did not converge on (15 "
         "iterations) is fused by the filter like a converged one; false: the frame keeps the "
@@ -224,8 +228,6 @@ class AgentConfig(BaseModel):
         default=0.35, gt=0, description="on arrival, a goal's look point this far off the "
         "heading counts as faced (well inside the camera's half FoV)")
     spin_omega_radps: float = Field(default=0.4, ge=0, description="rotation while idle")
-    # False: warehouse, 24 robots, 60 s, seeds 0 / 1: BV 43.3 / 26.9 → 29.1 / 23.2 %, ATE 19.0 /
-    # 10.8 → 9.3 / 9.0 cm; 3 robots, 9 missions in three worlds: 8 identical (docs/agent.md)
     # False: warehouse, 24 robots, 60 s, seeds 0 / 1: BV 43.3 / 26.9 → 29.1 / 23.2 %, ATE 19.0 /
     # 10.8 → 9.3 / 9.0 cm; 3 robots, 9 missions in three worlds: 8 identical (docs/agent.md)
     idle_spin_when_hidden: bool = Field(

@@ -94,11 +94,14 @@ def handle(
                          core.robot_id, msg.tick, cal.errors, cal.n_used, cal.n_rejected)
             walls = core.localizer.walls
             if walls is not None:
-                log.info("robot %d tick %d: wall heading: world direction %s, %d fused, "
-                         "%d rejected", core.robot_id, msg.tick,
-                         "unknown" if walls.world_rad is None
-                         else f"{np.degrees(walls.world_rad):+.2f}°",
+                log.info("robot %d tick %d: wall heading: world direction %s (own %s, %d "
+                         "teammates'), %d fused, %d rejected", core.robot_id, msg.tick,
+                         _degrees(walls.world_rad), _degrees(walls.own_rad), len(walls.team),
                          walls.n_fused, walls.n_rejected)
+
+
+def _degrees(angle_rad: float | None) -> str:
+    return "unknown" if angle_rad is None else f"{np.degrees(angle_rad):+.2f}°"
 
 
 def _apply(core: AgentCore, msg: Message) -> None:

@@ -39,7 +39,8 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
         if cfg.reg_scan_heading else None,
         wall_heading=WallHeadingParams(min_points=cfg.reg_wall_min_points,
                                        sigma_rad=cfg.reg_wall_sigma_rad,
-                                       learn_max_sigma_rad=cfg.reg_wall_learn_max_sigma_rad)
+                                       learn_max_sigma_rad=cfg.reg_wall_learn_max_sigma_rad,
+                                       team_inlier_rad=cfg.reg_wall_team_inlier_rad or None)
         if cfg.reg_wall_heading else None,
     )
 
