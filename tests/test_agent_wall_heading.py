@@ -171,3 +171,20 @@ def test_teammates_directions_travel_with_their_poses() -> None:
     for bad in (1.0, float("nan")):
         with pytest.raises(ValidationError):
             RobotPose(robot_id=1, tick=3, stamp_ns=3, pose_world=pose, wall_direction_rad=bad)
+
+
+def test_a_robot_that_agrees_with_the_team_keeps_its_own_direction() -> None:
+    """Within the inlier window nothing changes: the robot fuses against what it learned,
+    as it would alone (3-robot missions run exactly as without teammates)."""
+    rng = np.random.default_rng(6)
+    room = _rotated(_room(rng), 0.1)
+    walls = WallHeading(PARAMS)
+    start = np.zeros(3)
+    for _ in range(PARAMS.learn_frames):
+        walls.update(start, np.zeros((3, 3)), *_frame(room, (0.0, 0.0, 0.0)))
+    own = walls.own_rad
+    assert own is not None and abs(math.degrees(own) - 0.1) < 0.1
+    walls.receive(1, own - math.radians(0.2), 0.0)  # the median: own is 0.2° off it
+    walls.receive(2, own - math.radians(0.25), 0.0)
+    walls.update(start, np.diag([1e-6, 1e-6, 1e-6]), *_frame(room, (0.0, 0.0, 0.0)))
+    assert walls.world_rad == own

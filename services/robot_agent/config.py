@@ -113,9 +113,10 @@ class AgentConfig(BaseModel):
         "wall direction is learned only from early frames whose filter yaw σ is at most this, "
         "rad (1°)")
     reg_wall_team_inlier_rad: float = Field(
-        default=0.005235987755982988, ge=0, description="with reg_wall_heading: the world's "
-        "wall direction is the mean of the robots' learned ones within this of their median "
-        "(teammates' arrive with their poses), rad (0.3°); 0 = each robot its own")
+        default=0.005235987755982988, ge=0, description="with reg_wall_heading: a robot whose "
+        "learned wall direction lies more than this from the robots' median (teammates' arrive "
+        "with their poses) takes the mean of those within it instead, rad (0.3°); 0 = each "
+        "robot its own")
     reg_use_unconverged: bool = Field(
         default=False, description="GICP's pose on a frame it did not converge on (15 "
         "iterations) is fused by the filter like a converged one; false: the frame keeps the "

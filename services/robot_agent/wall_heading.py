@@ -57,8 +57,8 @@ class WallHeadingParams:
     # frames count for less as odometry loses the turn
     learn_frames: int = 20
     learn_max_sigma_rad: float = np.radians(1.0)
-    # teammates' learned directions (one world, one direction): the world's direction is the
-    # mean of those within this of their median, the robot's own among them; None: own only
+    # teammates' learned directions (one world, one direction): a robot whose own lies more
+    # than this from the robots' median takes the mean of those within it; None: own only
     team_inlier_rad: float | None = np.radians(0.3)
 
 
@@ -219,12 +219,17 @@ class WallHeading:
         return None if own is None else float(fold(own + yaw_world_loc))
 
     def _world_after_learning(self, P: np.ndarray) -> tuple[float | None, np.ndarray]:
-        """The direction to fuse against, and P with the yaw variance a change of it reveals:
-        a robot that held its heading to a direction δ off has a heading δ off."""
-        if self.params.team_inlier_rad is None:
+        """The direction to fuse against: its own, unless the team's says it learned off
+        (then P grows by the change: a robot that held its heading to a direction δ off has a
+        heading δ off). Agreeing robots keep their own, so a team that learned alike (every
+        3-robot mission so far: within 0.2°) runs exactly as without teammates."""
+        inlier = self.params.team_inlier_rad
+        if inlier is None:
             return self.world_rad, P
-        world = team_direction(self.own_rad, list(self.team.values()),
-                               self.params.team_inlier_rad)
+        own = self.own_rad
+        world = team_direction(own, list(self.team.values()), inlier)
+        if own is not None and world is not None and abs(float(fold(own - world))) <= inlier:
+            world = own
         if world is not None and self.world_rad is not None:
             delta = float(fold(world - self.world_rad))
             if delta != 0.0:
