@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
+from services.common.grid import GridSpec
 from services.config import SpacemapConfig
 from services.edge_server.assignment import greedy_match, make_scorer
 from services.edge_server.config import EdgeConfig
@@ -16,7 +18,7 @@ from services.edge_server.coordination import (
     travel_time_s,
     view_information,
 )
-from services.edge_server.frontiers import FrontierSet
+from services.edge_server.frontiers import FrontierSet, frontier_length_near
 
 
 def regions(centroid_xy: list[tuple[float, float]], gain: list[float]) -> FrontierSet:
@@ -95,3 +97,32 @@ def test_mission_config_gives_the_edge_the_agents_speeds() -> None:
     own = SpacemapConfig.model_validate({"agent": {"max_v_mps": 0.3}, "edge": {"nav_v_mps": 0.4}})
     assert own.edge.nav_v_mps == 0.4
     assert SpacemapConfig().edge.nav_v_mps == SpacemapConfig().agent.max_v_mps
+
+
+def test_grid_border_near_a_goal_counts_only_free_unknown_border() -> None:
+    """The floor a goal looks into: free cells next to unknown ones within the square, in
+    metres; unknown space behind a wall (no free border) counts nothing."""
+    spec = GridSpec(0.0, 0.0, 0.05, 100, 100)
+    known = np.zeros((100, 100), bool)
+    known[:, :50] = True
+    free = known.copy()
+    free[40:, 40:50] = False  # rows 40+ end at a wall (occupied) before the unknown
+    cells = np.array([[20, 45], [80, 35], [20, 5]])
+    near = frontier_length_near(free, known, cells, spec, 1.0, 5)
+    np.testing.assert_allclose(near, [40 * 0.05, 0.0, 0.0], atol=1e-6)
+
+
+def test_space_with_grid_gain_goes_where_the_unknown_floor_is() -> None:
+    """Two equal regions at equal distance: without the grid term it is a tie broken by
+    order; with it the one at a long border to unknown floor wins, unless a teammate's goal
+    is already there."""
+    fs = replace(regions([(2.0, 0.0), (-2.0, 0.0)], [1.0, 1.0]),
+                 grid_frontier_m=np.array([0.0, 3.0]))
+    path = np.array([[2.0, 2.0]])
+    robot = RobotStates(np.zeros((1, 2)), np.array([math.pi / 2]), np.zeros((0, 2)))
+    plain = make_scorer("space", EdgeConfig()).score(path, fs, robot)
+    assert plain[0, 0] == plain[0, 1]
+    scorer = make_scorer("space", EdgeConfig(space_grid_gain_per_m=0.3))
+    assert int(np.argmax(scorer.score(path, fs, robot)[0])) == 1
+    held = RobotStates(np.zeros((1, 2)), np.array([math.pi / 2]), np.array([[-2.5, 0.0]]))
+    assert int(np.argmax(scorer.score(path, fs, held)[0])) == 0

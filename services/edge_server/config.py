@@ -60,6 +60,13 @@ class EdgeConfig(BaseModel):
         "goal this close discounts them")
     space_teammate_discount: float = Field(default=0.25, ge=0, le=1)
     space_joint: bool = Field(default=True, description="assignment problem instead of greedy")
+    space_grid_gain_per_m: float = Field(
+        default=0.0, ge=0, description="`space`: a goal is also worth this per metre of 2D "
+        "grid frontier within space_grid_view_m of it (the unknown floor it looks into), so "
+        "the team spreads out before it cleans up; 0: 3D regions only")
+    space_grid_view_m: float = Field(
+        default=2.5, gt=0, description="half-side of the square around f′ whose grid frontier "
+        "counts, m")
     space_reached_final: bool = Field(
         default=True, description="a reached goal's place is set aside for good (with 100 "
         "ticks, 20-38 of 57-77 reached goals of a house mission went back to a place already "

@@ -40,6 +40,7 @@ class FrontierSet:
     gain: np.ndarray | None = None  # (F,) I_g(f); None = size in metres
     importance: np.ndarray | None = None  # (F,) I_t(f); None = 1
     centroid_z: np.ndarray | None = None  # (F,) mean height of V_f (3D frontiers)
+    grid_frontier_m: np.ndarray | None = None  # (F,) m of 2D grid frontier near f′ (space)
 
     def __len__(self) -> int:
         return int(self.sizes.size)
@@ -126,3 +127,18 @@ def frontier_set(
         goal_xy=spec.centre_of(goal_rc[ok]),
         dropped_unreachable=int((~ok).sum()),
     )
+
+
+def frontier_length_near(free: np.ndarray, known: np.ndarray, cells_rc: np.ndarray,
+                         spec: GridSpec, radius_m: float, min_cells: int) -> np.ndarray:
+    """(N,) metres of free/unknown border (clusters of ≥ `min_cells`) within a square of
+    half-side `radius_m` around each cell: how much unknown floor a robot there looks into.
+    Unknown space behind walls has no free border, so it counts nothing."""
+    if not len(cells_rc):
+        return np.zeros(0)
+    labels, _ = _clusters(frontier_cells(free, known), min_cells)
+    k = max(int(round(radius_m / spec.resolution_m)), 0)
+    near = ndimage.uniform_filter((labels > 0).astype(np.float32), size=2 * k + 1,
+                                  mode="constant")
+    return near[cells_rc[:, 0], cells_rc[:, 1]].astype(np.float64) * (2 * k + 1) ** 2 \
+        * spec.resolution_m

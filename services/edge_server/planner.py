@@ -36,6 +36,7 @@ from services.edge_server.frontiers import (
     GoalTransform,
     detect_frontiers,
     empty_frontiers,
+    frontier_length_near,
     frontier_set,
     goal_transform,
 )
@@ -200,7 +201,10 @@ class EdgePlanner:
             fs = subset(fs, ~(fs.weak & self.visits.seen(fs.centroid_xy)))
             imp = importance(tick * self.tick_s, robot_xy, fs.centroid_xy, fs.weak,
                              cfg.importance_lambda, cfg.importance_xi_s)
-            return replace(fs, importance=imp)
+            border = (frontier_length_near(snap.free, snap.known, fs.goal_rc, spec,
+                                           cfg.space_grid_view_m, cfg.frontier_min_cells)
+                      if cfg.space_grid_gain_per_m > 0 else None)
+            return replace(fs, importance=imp, grid_frontier_m=border)
         if cfg.planner == "rrt":
             starts = [fields.starts[r] for r in sorted(fields.starts)]
             rng = np.random.default_rng([cfg.seed, tick])
