@@ -18,6 +18,7 @@ from services.common.geometry import wrap_angle
 from services.common.grid import GridSpec
 from services.common.planning import astar, disk, inflate, reachable
 from services.robot_agent.config import AgentConfig
+from services.robot_agent.contacts import ContactLayer, ContactParams
 from services.robot_agent.local_grid import OCCUPIED, UNKNOWN, LocalGrid
 from services.robot_agent.path_smoothing import smooth_path
 from services.robot_agent.validator import PassLog, expected_times, window_exceeded
@@ -158,6 +159,15 @@ class Navigator:
         self.avoid_xy: np.ndarray | None = None  # a teammate to plan around (`avoid`)
         self.avoid_until = -1
         self.had_goal = False
+        self.contacts = (ContactLayer(ContactParams(), config.robot_radius_m)
+                         if config.contact_layer else None)
+
+    def observe_motion(self, pose: tuple[float, float, float], v_cmd_mps: float,
+                       teammates_xy: np.ndarray) -> None:
+        """The command sent from `pose` this tick: a stall marks a contact (contacts.py),
+        and the path is planned around it at once."""
+        if self.contacts is not None and self.contacts.observe(pose, v_cmd_mps, teammates_xy):
+            self.plan_tick = -(10**9)
 
     def set_goal(self, goal: Goal, tick: int) -> StatusEvent | None:
         """Adopt a goal; the same goal id again changes nothing."""
@@ -196,6 +206,8 @@ class Navigator:
             spec.resolution_m, rows.stop - rows.start, cols.stop - cols.start,
         )
         cells = self._blocked_by_teammate(grid.cells(rows, cols), sub, tick)
+        if self.contacts is not None:
+            cells = self.contacts.mark(cells, sub)
         radius = inflation_cells(cfg, spec.resolution_m)
         trav = traversable_of(cells, radius, cfg.plan_through_unknown)
         result = plan_path(trav, sub, xy, goal_xy, cfg.goal_snap_m, cfg.smooth_paths)
