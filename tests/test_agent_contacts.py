@@ -18,7 +18,7 @@ NOBODY = np.zeros((0, 2))
 
 def _stall(layer: ContactLayer, pose: tuple[float, float, float], ticks: int,
            teammates: np.ndarray = NOBODY) -> list[bool]:
-    return [layer.observe(pose, 0.3, teammates) for _ in range(ticks)]
+    return [layer.observe(k, pose, 0.3, teammates) for k in range(ticks)]
 
 
 def test_a_second_pushing_without_moving_marks_the_front() -> None:
@@ -27,17 +27,19 @@ def test_a_second_pushing_without_moving_marks_the_front() -> None:
     assert added == [False] * 10 + [True] and layer.n_contacts == 1
     assert np.allclose(layer.points_xy[len(layer.points_xy) // 2], [1.23, 2.0])
     spec = GridSpec(0.0, 0.0, 0.05, 80, 80)
-    cells = layer.mark(np.zeros(spec.shape, np.int8), spec)
+    cells = layer.mark(np.zeros(spec.shape, np.int8), spec, 11)
     assert cells[spec.cell_of(np.array([[1.23, 2.0]]))[0][0],
                  spec.cell_of(np.array([[1.23, 2.0]]))[0][1]] == OCCUPIED
     assert (cells == OCCUPIED).sum() >= 5
+    forgotten = layer.mark(np.zeros(spec.shape, np.int8), spec, 10 + ContactParams().ttl_ticks)
+    assert not (forgotten == OCCUPIED).any()
 
 
 def test_moving_turning_or_a_teammate_close_leave_no_mark() -> None:
     layer = ContactLayer(ContactParams(), robot_radius_m=0.18)
     for k in range(30):  # driving at 5 cm per tick
-        assert not layer.observe((0.05 * k, 0.0, 0.0), 0.5, NOBODY)
-    assert not any(layer.observe((2.0, 0.0, 0.1 * k), 0.0, NOBODY) for k in range(30))
+        assert not layer.observe(k, (0.05 * k, 0.0, 0.0), 0.5, NOBODY)
+    assert not any(layer.observe(k, (2.0, 0.0, 0.1 * k), 0.0, NOBODY) for k in range(30))
     assert not any(_stall(layer, (2.0, 0.0, 0.0), 30, np.array([[2.6, 0.0]])))
     assert layer.n_contacts == 0
 
@@ -55,9 +57,27 @@ def test_the_navigator_plans_around_a_contact() -> None:
     cmd, _ = nav.step(pose, grid, 1)
     assert cmd.v_mps > 0 and np.all(np.abs(nav.path_xy[:, 1]) < 0.05)  # straight ahead
     for tick in range(2, 14):
-        nav.observe_motion(pose, 0.3, NOBODY)
+        nav.observe_motion(tick, pose, 0.3, NOBODY)
     nav.step(pose, grid, 14)
     assert nav.contacts is not None and nav.contacts.n_contacts == 1
     ahead = nav.path_xy[(nav.path_xy[:, 0] > 0.15) & (nav.path_xy[:, 0] < 0.35)]
     assert len(ahead) and np.all(np.abs(ahead[:, 1]) > 0.15)
     assert math.isclose(nav.path_xy[-1][0], 1.5, abs_tol=0.1)
+
+
+def test_a_contact_that_closes_the_only_way_is_ignored() -> None:
+    """A stall in a corridor must not end every goal beyond it as unreachable: the path goes
+    around the contact where there is a way, through it where there is none."""
+    nav = Navigator(AgentConfig(contact_layer=True), 0.1)
+    grid = LocalGrid.centred(0.0, 0.0, 3.0, 0.05)
+    xs = np.arange(-2.0, 2.0, 0.05)
+    corridor = np.array([(x, y) for x in xs for y in (-0.3, -0.25, 0.25, 0.3)])
+    grid.update(np.array([(x, y) for x in xs for y in np.arange(-0.2, 0.21, 0.05)]), corridor)
+    nav.set_goal(Goal(robot_id=0, goal_id=1, tick=0, x=1.5, y=0.0, frontier_class="unexplored",
+                      revenue=1.0), 0)
+    pose = (0.0, 0.0, 0.0)
+    for tick in range(1, 13):
+        nav.observe_motion(tick, pose, 0.3, NOBODY)
+    cmd, event = nav.step(pose, grid, 13)
+    assert nav.contacts is not None and nav.contacts.n_contacts == 1
+    assert event is None and nav.path_xy is not None and cmd.v_mps >= 0.0

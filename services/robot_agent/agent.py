@@ -234,7 +234,8 @@ class AgentCore:
             # Still until the first frame anchors the map: odometry drifts only with motion, and
             # the yaw it lost in a first spin (0.1-0.5 deg) would rotate the whole map.
             cmd = Command(0.0, 0.0)
-        self.nav.observe_motion(pose_world, cmd.v_mps, teammates_xy(self.teammates))
+        self.nav.observe_motion(odom.tick, pose_world, cmd.v_mps,
+                                teammates_xy(self.teammates))
         events += [event] if event is not None else []
         self._adopt_queued(events)
         return self._outputs(odom, pose_world, deltas, events, cmd)

@@ -162,11 +162,12 @@ class Navigator:
         self.contacts = (ContactLayer(ContactParams(), config.robot_radius_m)
                          if config.contact_layer else None)
 
-    def observe_motion(self, pose: tuple[float, float, float], v_cmd_mps: float,
+    def observe_motion(self, tick: int, pose: tuple[float, float, float], v_cmd_mps: float,
                        teammates_xy: np.ndarray) -> None:
         """The command sent from `pose` this tick: a stall marks a contact (contacts.py),
         and the path is planned around it at once."""
-        if self.contacts is not None and self.contacts.observe(pose, v_cmd_mps, teammates_xy):
+        if self.contacts is not None and self.contacts.observe(tick, pose, v_cmd_mps,
+                                                                teammates_xy):
             self.plan_tick = -(10**9)
 
     def set_goal(self, goal: Goal, tick: int) -> StatusEvent | None:
@@ -206,11 +207,15 @@ class Navigator:
             spec.resolution_m, rows.stop - rows.start, cols.stop - cols.start,
         )
         cells = self._blocked_by_teammate(grid.cells(rows, cols), sub, tick)
-        if self.contacts is not None:
-            cells = self.contacts.mark(cells, sub)
         radius = inflation_cells(cfg, spec.resolution_m)
-        trav = traversable_of(cells, radius, cfg.plan_through_unknown)
-        result = plan_path(trav, sub, xy, goal_xy, cfg.goal_snap_m, cfg.smooth_paths)
+        result = PlanResult(None)
+        if self.contacts is not None:  # around what the robot ran into, where there is a way
+            trav = traversable_of(self.contacts.mark(cells, sub, tick), radius,
+                                  cfg.plan_through_unknown)
+            result = plan_path(trav, sub, xy, goal_xy, cfg.goal_snap_m, cfg.smooth_paths)
+        if result.path_xy is None:
+            trav = traversable_of(cells, radius, cfg.plan_through_unknown)
+            result = plan_path(trav, sub, xy, goal_xy, cfg.goal_snap_m, cfg.smooth_paths)
         self.plan_tick = tick
         if result.path_xy is not None:
             # The path starts at the robot's cell: t_e from the robot's pose, then the path.
