@@ -65,9 +65,9 @@ def test_the_navigator_plans_around_a_contact() -> None:
     assert math.isclose(nav.path_xy[-1][0], 1.5, abs_tol=0.1)
 
 
-def test_a_contact_that_closes_the_only_way_is_ignored() -> None:
-    """A stall in a corridor must not end every goal beyond it as unreachable: the path goes
-    around the contact where there is a way, through it where there is none."""
+def test_a_goal_only_reachable_through_a_contact_is_unreachable() -> None:
+    """A stall in a corridor: pushing on would only stall again until the validator gave up;
+    the goal ends unreachable at once (the edge sets it aside; the mark fades in 15 s)."""
     nav = Navigator(AgentConfig(contact_layer=True), 0.1)
     grid = LocalGrid.centred(0.0, 0.0, 3.0, 0.05)
     xs = np.arange(-2.0, 2.0, 0.05)
@@ -76,8 +76,11 @@ def test_a_contact_that_closes_the_only_way_is_ignored() -> None:
     nav.set_goal(Goal(robot_id=0, goal_id=1, tick=0, x=1.5, y=0.0, frontier_class="unexplored",
                       revenue=1.0), 0)
     pose = (0.0, 0.0, 0.0)
-    for tick in range(1, 13):
+    cmd, event = nav.step(pose, grid, 1)
+    assert event is None and nav.path_xy is not None  # the corridor is open
+    for tick in range(2, 14):
         nav.observe_motion(tick, pose, 0.3, NOBODY)
-    cmd, event = nav.step(pose, grid, 13)
+    cmd, event = nav.step(pose, grid, 14)
     assert nav.contacts is not None and nav.contacts.n_contacts == 1
-    assert event is None and nav.path_xy is not None and cmd.v_mps >= 0.0
+    assert event is not None and event.status == "unreachable"
+    assert event.reason == "only through what the robot ran into"

@@ -208,14 +208,15 @@ class Navigator:
         )
         cells = self._blocked_by_teammate(grid.cells(rows, cols), sub, tick)
         radius = inflation_cells(cfg, spec.resolution_m)
-        result = PlanResult(None)
-        if self.contacts is not None:  # around what the robot ran into, where there is a way
-            trav = traversable_of(self.contacts.mark(cells, sub, tick), radius,
-                                  cfg.plan_through_unknown)
-            result = plan_path(trav, sub, xy, goal_xy, cfg.goal_snap_m, cfg.smooth_paths)
-        if result.path_xy is None:
-            trav = traversable_of(cells, radius, cfg.plan_through_unknown)
-            result = plan_path(trav, sub, xy, goal_xy, cfg.goal_snap_m, cfg.smooth_paths)
+        trav = traversable_of(cells, radius, cfg.plan_through_unknown)
+        result = plan_path(trav, sub, xy, goal_xy, cfg.goal_snap_m, cfg.smooth_paths)
+        if self.contacts is not None and result.path_xy is not None:
+            # around what the robot ran into; a goal only reachable through it is not
+            around = plan_path(traversable_of(self.contacts.mark(cells, sub, tick), radius,
+                                              cfg.plan_through_unknown),
+                               sub, xy, goal_xy, cfg.goal_snap_m, cfg.smooth_paths)
+            result = around if around.path_xy is not None else PlanResult(
+                None, "only through what the robot ran into")
         self.plan_tick = tick
         if result.path_xy is not None:
             # The path starts at the robot's cell: t_e from the robot's pose, then the path.
