@@ -70,9 +70,12 @@ def test_a_goal_only_reachable_through_a_contact_is_unreachable() -> None:
     the goal ends unreachable at once (the edge sets it aside; the mark fades in 15 s)."""
     nav = Navigator(AgentConfig(contact_layer=True), 0.1)
     grid = LocalGrid.centred(0.0, 0.0, 3.0, 0.05)
-    xs = np.arange(-2.0, 2.0, 0.05)
-    corridor = np.array([(x, y) for x in xs for y in (-0.3, -0.25, 0.25, 0.3)])
-    grid.update(np.array([(x, y) for x in xs for y in np.arange(-0.2, 0.21, 0.05)]), corridor)
+    xs = np.arange(-3.0, 3.0, 0.05)
+    thick = np.arange(0.4, 1.2, 0.05)  # walls thicker than the goal snap
+    walls = [(x, s * y) for x in xs for y in thick for s in (-1, 1)]
+    end = [(x, y) for x in np.arange(1.8, 2.6, 0.05) for y in np.arange(-0.4, 0.41, 0.05)]
+    grid.update(np.array([(x, y) for x in xs[xs < 1.8] for y in np.arange(-0.35, 0.36, 0.05)]),
+                np.array(walls + end))
     nav.set_goal(Goal(robot_id=0, goal_id=1, tick=0, x=1.5, y=0.0, frontier_class="unexplored",
                       revenue=1.0), 0)
     pose = (0.0, 0.0, 0.0)
