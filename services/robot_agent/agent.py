@@ -53,7 +53,7 @@ from services.robot_agent.localization import Localizer
 from services.robot_agent.navigation import Command, Navigator, StatusEvent
 from services.robot_agent.params import drf_params, loop_params, registration_params
 from services.robot_agent.projection import cam_to_base, depth_to_points, hfov_of, pixel_colors
-from services.robot_agent.teammates import predict_xy
+from services.robot_agent.teammates import predict_xy, teammates_xy
 from services.robot_agent.yielding import YieldRule
 
 if TYPE_CHECKING:
@@ -237,6 +237,8 @@ class AgentCore:
             # Still until the first frame anchors the map: odometry drifts only with motion, and
             # the yaw it lost in a first spin (0.1-0.5 deg) would rotate the whole map.
             cmd = Command(0.0, 0.0)
+        self.nav.observe_motion(odom.tick, pose_world, cmd.v_mps,
+                                teammates_xy(self.teammates))
         events += [event] if event is not None else []
         self._adopt_queued(events)
         return self._outputs(odom, pose_world, deltas, events, cmd)

@@ -239,6 +239,10 @@ class AgentConfig(BaseModel):
         default=True, description="spin while idle before the first goal too (False: hold "
         "still: robots that start side by side see mostly teammates, so the turn goes "
         "unregistered and odometry's turn error stays in the map)")
+    contact_layer: bool = Field(
+        default=False, description="commanded forward for a second without moving, the robot "
+        "marks the cells just ahead occupied for its planner from then on (contacts.py: what "
+        "the camera misses, such as a chair's seat over its legs)")
     yield_dist_m: float = Field(
         default=0.7, ge=0, description="stop driving when a teammate centre is this close ahead"
     )

@@ -18,6 +18,7 @@ from services.common.geometry import wrap_angle
 from services.common.grid import GridSpec
 from services.common.planning import astar, disk, inflate, reachable
 from services.robot_agent.config import AgentConfig
+from services.robot_agent.contacts import ContactLayer, ContactParams
 from services.robot_agent.local_grid import OCCUPIED, UNKNOWN, LocalGrid
 from services.robot_agent.path_smoothing import smooth_path
 from services.robot_agent.validator import PassLog, expected_times, window_exceeded
@@ -158,6 +159,16 @@ class Navigator:
         self.avoid_xy: np.ndarray | None = None  # a teammate to plan around (`avoid`)
         self.avoid_until = -1
         self.had_goal = False
+        self.contacts = (ContactLayer(ContactParams(), config.robot_radius_m)
+                         if config.contact_layer else None)
+
+    def observe_motion(self, tick: int, pose: tuple[float, float, float], v_cmd_mps: float,
+                       teammates_xy: np.ndarray) -> None:
+        """The command sent from `pose` this tick: a stall marks a contact (contacts.py),
+        and the path is planned around it at once."""
+        if self.contacts is not None and self.contacts.observe(tick, pose, v_cmd_mps,
+                                                                teammates_xy):
+            self.plan_tick = -(10**9)
 
     def set_goal(self, goal: Goal, tick: int) -> StatusEvent | None:
         """Adopt a goal; the same goal id again changes nothing."""
@@ -199,6 +210,13 @@ class Navigator:
         radius = inflation_cells(cfg, spec.resolution_m)
         trav = traversable_of(cells, radius, cfg.plan_through_unknown)
         result = plan_path(trav, sub, xy, goal_xy, cfg.goal_snap_m, cfg.smooth_paths)
+        if self.contacts is not None and result.path_xy is not None:
+            # around what the robot ran into; a goal only reachable through it is not
+            around = plan_path(traversable_of(self.contacts.mark(cells, sub, tick), radius,
+                                              cfg.plan_through_unknown),
+                               sub, xy, goal_xy, cfg.goal_snap_m, cfg.smooth_paths)
+            result = around if around.path_xy is not None else PlanResult(
+                None, "only through what the robot ran into")
         self.plan_tick = tick
         if result.path_xy is not None:
             # The path starts at the robot's cell: t_e from the robot's pose, then the path.

@@ -20,3 +20,9 @@ def predict_xy(last: RobotPose, prev: RobotPose | None, tick: int, max_ticks: in
     q = prev.pose_world
     v = (xy - np.array([q.x, q.y])) / (last.tick - prev.tick)
     return xy + v * min(max(tick - last.tick, 0), max_ticks)
+
+
+def teammates_xy(teammates: dict[int, RobotPose]) -> np.ndarray:
+    """(N, 2) the teammates' last estimated xy, world frame."""
+    return np.array([[p.pose_world.x, p.pose_world.y] for p in teammates.values()],
+                    np.float64).reshape(-1, 2)
