@@ -119,3 +119,16 @@ def test_revisits_count_reached_goals_at_a_place_reached_before() -> None:
     assert revisits(events) == (2, 4)
     assert revisits(events, radius_m=0.1) == (0, 4)
     assert revisits([]) == (0, 0)
+
+
+def test_stalled_counts_following_without_moving() -> None:
+    """10 s following: 4 s driving at 1 m/s, then 6 s against something; the first second of
+    the stall still sees the drive behind it. Turning in place is not a stall."""
+    stamps = np.arange(0, 151) * TICK_S
+    x = np.minimum(stamps, 4.0)
+    xy = np.stack([x, np.zeros_like(x)], axis=1)
+    events = [{"tick": 0, "kind": "state", "state": "following"},
+              {"tick": 100, "kind": "state", "state": "turning"}]
+    out = explain_robot(events, stamps, xy, end_tick=150, tick_s=TICK_S)
+    assert out.stalled_s == pytest.approx(5.0, abs=0.15)  # 5.0-10.0 s
+    assert "(stalled 5)" in markdown({0: out})

@@ -13,7 +13,9 @@ saw on the bus). Each goal is given one outcome:
 A goal's span runs from its assignment to that outcome; the robot's distance over the span
 comes from its ground-truth path (the evaluator's, never the agents'). Time without a goal
 is `no goal`. States (`idle` = spinning with no goal, `turning`, `following`) are summed
-from their changes.
+from their changes; `stalled` is the part of `following` in which the true position moved
+less than 1 cm over the last second (pushing at what the camera missed, or yielding to a
+teammate: docs/agent.md, "Blocked by what the camera misses").
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ class RobotExplain:
     distance_m: dict[str, float] = field(default_factory=dict)  # same keys → m
     class_time_s: dict[str, float] = field(default_factory=dict)  # frontier class → s
     state_time_s: dict[str, float] = field(default_factory=dict)  # nav state → s
+    stalled_s: float = 0.0  # "following" without moving (1 cm over 1 s)
     total_time_s: float = 0.0
     total_distance_m: float = 0.0
 
@@ -113,10 +116,30 @@ def state_times(events: Sequence[dict[str, Any]], end_tick: int, tick_s: float
     return dict(out)
 
 
+def stalled_time(events: Sequence[dict[str, Any]], stamps_s: np.ndarray, xy: np.ndarray,
+                 tick_s: float, window_s: float = 1.0, min_move_m: float = 0.01) -> float:
+    """Seconds of the true path's samples in state "following" whose position is within
+    `min_move_m` of where it was `window_s` earlier."""
+    changes = [(int(e["tick"]) * tick_s, str(e["state"])) for e in events
+               if e["kind"] == "state"]
+    if len(xy) < 2 or not changes:
+        return 0.0
+    times = np.array([t for t, _ in changes])
+    following = np.array([state == "following" for _, state in changes])
+    at = np.searchsorted(times, stamps_s + 1e-9, side="right") - 1
+    now_following = np.where(at >= 0, following[np.maximum(at, 0)], False)
+    back = np.maximum(np.searchsorted(stamps_s, stamps_s - window_s + 1e-9, side="right") - 1, 0)
+    still = (stamps_s - stamps_s[back] >= window_s - 1e-6) & (
+        np.hypot(*(xy - xy[back]).T) < min_move_m)
+    step = float(np.median(np.diff(stamps_s)))
+    return float(np.count_nonzero(now_following & still) * step)
+
+
 def explain_robot(events: Sequence[dict[str, Any]], stamps_s: np.ndarray, xy: np.ndarray,
                   end_tick: int, tick_s: float) -> RobotExplain:
     """One robot's breakdown; `stamps_s`, `xy` its true path (N,), (N, 2)."""
-    out = RobotExplain(state_time_s=state_times(events, end_tick, tick_s))
+    out = RobotExplain(state_time_s=state_times(events, end_tick, tick_s),
+                       stalled_s=stalled_time(events, stamps_s, xy, tick_s))
     out.total_time_s = end_tick * tick_s
     out.total_distance_m = path_length(stamps_s, xy, -1.0, end_tick * tick_s)
     time, dist, cls = Counter(), Counter(), Counter()
@@ -150,6 +173,7 @@ def markdown(per_robot: dict[int, RobotExplain]) -> str:
         goals = ", ".join(f"{k} {r.goals[k]}" for k in OUTCOMES if r.goals[k])
         classes = ", ".join(f"{k} {v:.0f}" for k, v in sorted(r.class_time_s.items()))
         states = ", ".join(f"{k} {v:.0f}" for k, v in sorted(r.state_time_s.items()))
+        states += f" (stalled {r.stalled_s:.0f})"
         lines.append(f"| {robot} | {goals} | {classes} | {states} |")
     return "\n".join(lines) + "\n"
 
