@@ -31,8 +31,9 @@ def test_a_second_pushing_without_moving_marks_the_front() -> None:
     assert cells[spec.cell_of(np.array([[1.23, 2.0]]))[0][0],
                  spec.cell_of(np.array([[1.23, 2.0]]))[0][1]] == OCCUPIED
     assert (cells == OCCUPIED).sum() >= 5
+    assert layer.active(11)
     forgotten = layer.mark(np.zeros(spec.shape, np.int8), spec, 10 + ContactParams().ttl_ticks)
-    assert not (forgotten == OCCUPIED).any()
+    assert not (forgotten == OCCUPIED).any() and not layer.active(10 + ContactParams().ttl_ticks)
 
 
 def test_moving_turning_or_a_teammate_close_leave_no_mark() -> None:

@@ -78,6 +78,10 @@ class ContactLayer:
         self.ticks = np.concatenate([self.ticks[live], np.full(len(arc), tick)])
         self.n_contacts += 1
 
+    def active(self, tick: int) -> bool:
+        """Whether any mark is still in force at `tick`."""
+        return bool(len(self.ticks)) and int(self.ticks.max()) > tick - self.params.ttl_ticks
+
     def mark(self, cells: np.ndarray, spec: GridSpec, tick: int) -> np.ndarray:
         """`cells` (a window of the local grid described by `spec`) with the contacts of the
         last `ttl_ticks` occupied."""

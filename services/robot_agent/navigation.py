@@ -210,7 +210,8 @@ class Navigator:
         radius = inflation_cells(cfg, spec.resolution_m)
         trav = traversable_of(cells, radius, cfg.plan_through_unknown)
         result = plan_path(trav, sub, xy, goal_xy, cfg.goal_snap_m, cfg.smooth_paths)
-        if self.contacts is not None and result.path_xy is not None:
+        if self.contacts is not None and result.path_xy is not None \
+                and self.contacts.active(tick):
             # around what the robot ran into; a goal only reachable through it is not
             around = plan_path(traversable_of(self.contacts.mark(cells, sub, tick), radius,
                                               cfg.plan_through_unknown),
