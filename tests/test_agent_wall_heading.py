@@ -188,3 +188,41 @@ def test_a_robot_that_agrees_with_the_team_keeps_its_own_direction() -> None:
     walls.receive(2, own - math.radians(0.25), 0.0)
     walls.update(start, np.diag([1e-6, 1e-6, 1e-6]), *_frame(room, (0.0, 0.0, 0.0)))
     assert walls.world_rad == own
+
+
+def test_walls_that_disagree_alike_frame_after_frame_take_a_confident_wrong_heading_back(
+) -> None:
+    """Warehouse, seed 0: a robot turned into new ground with 1-7° of yaw error, registered
+    every frame to the map it built meanwhile, and the gate (its yaw σ 0.1°) rejected all 125
+    wall headings that would have brought it back. With `reacquire_frames` the walls win once
+    that many in a row agree; walls that disagree among themselves never do."""
+    rng = np.random.default_rng(11)
+    room = _room(rng)
+    params = WallHeadingParams(reacquire_frames=4)
+    truth = (0.0, 0.0, 0.0)
+    P_small = np.diag([1e-6, 1e-6, math.radians(0.1) ** 2])
+
+    def learned(p: WallHeadingParams) -> WallHeading:
+        walls = WallHeading(p)
+        for _ in range(p.learn_frames):
+            walls.update(np.zeros(3), P_small, *_frame(room, truth))
+        return walls
+
+    walls, never = learned(params), learned(PARAMS)
+    wrong = np.array([0.0, 0.0, math.radians(3.0)])
+    for _ in range(3):
+        kept, P = walls.update(wrong, P_small, *_frame(room, truth))
+        assert np.all(kept == wrong) and P[2, 2] == P_small[2, 2]
+    back, P = walls.update(wrong, P_small, *_frame(room, truth))
+    assert walls.n_reacquired == 1 and abs(math.degrees(back[2])) < 0.05
+    assert P[2, 2] < math.radians(0.25) ** 2
+    for _ in range(10):
+        kept, _ = never.update(wrong, P_small, *_frame(room, truth))
+        assert np.all(kept == wrong)
+    assert never.n_rejected == 10
+    # the frames' walls disagree among themselves (rooms turned ±1°): no re-acquisition
+    other = learned(params)
+    for yaw_deg in (1.0, -1.0, 1.0, -1.0, 1.0, -1.0):
+        kept, _ = other.update(wrong, P_small, *_frame(_rotated(room, yaw_deg), truth))
+        assert np.all(kept == wrong)
+    assert other.n_rejected == 6 and other.n_reacquired == 0

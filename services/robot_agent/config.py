@@ -117,6 +117,10 @@ class AgentConfig(BaseModel):
         "learned wall direction lies more than this from the robots' median (teammates' arrive "
         "with their poses) takes the mean of those within it instead, rad (0.3°); 0 = each "
         "robot its own")
+    reg_wall_reacquire_frames: int = Field(
+        default=0, ge=0, description="with reg_wall_heading: this many wall headings in a row "
+        "rejected by the χ² gate and agreeing within 0.5° make the filter take them (its yaw "
+        "variance grows by their mean innovation squared); 0 = never")
     reg_use_unconverged: bool = Field(
         default=False, description="GICP's pose on a frame it did not converge on (15 "
         "iterations) is fused by the filter like a converged one; false: the frame keeps the "

@@ -95,9 +95,9 @@ def handle(
             walls = core.localizer.walls
             if walls is not None:
                 log.info("robot %d tick %d: wall heading: world direction %s (own %s, %d "
-                         "teammates'), %d fused, %d rejected", core.robot_id, msg.tick,
-                         _degrees(walls.world_rad), _degrees(walls.own_rad), len(walls.team),
-                         walls.n_fused, walls.n_rejected)
+                         "teammates'), %d fused, %d rejected, %d re-acquired", core.robot_id,
+                         msg.tick, _degrees(walls.world_rad), _degrees(walls.own_rad),
+                         len(walls.team), walls.n_fused, walls.n_rejected, walls.n_reacquired)
 
 
 def _degrees(angle_rad: float | None) -> str:

@@ -60,6 +60,11 @@ class WallHeadingParams:
     # teammates' learned directions (one world, one direction): a robot whose own lies more
     # than this from the robots' median takes the mean of those within it; None: own only
     team_inlier_rad: float | None = np.radians(0.3)
+    # this many measurements in a row rejected by the gate, their innovations within
+    # `reacquire_spread_rad` of each other: the filter's heading is wrong, not the walls
+    # (every frame's walls agree); P's yaw variance grows to take them. None: never
+    reacquire_frames: int | None = None
+    reacquire_spread_rad: float = np.radians(0.5)
 
 
 @dataclass(frozen=True)
@@ -199,6 +204,8 @@ class WallHeading:
         self.n_frames = 0
         self.n_fused = 0
         self.n_rejected = 0
+        self.n_reacquired = 0
+        self._rejected: list[float] = []  # innovations of the rejections in a row
 
     @property
     def own_rad(self) -> float | None:
@@ -259,6 +266,29 @@ class WallHeading:
         fusion = fuse_heading(xyyaw, P, yaw, direction.sigma_rad, self.params.chi2_gate)
         if fusion.accepted:
             self.n_fused += 1
-        else:
-            self.n_rejected += 1
+            self._rejected = []
+            return fusion.xyyaw, fusion.P
+        self.n_rejected += 1
+        P = self._reacquire(P, float(wrap_angle(yaw - xyyaw[2])))
+        if P is None:
+            return xyyaw, fusion.P
+        self.n_reacquired += 1
+        fusion = fuse_heading(xyyaw, P, yaw, direction.sigma_rad, np.inf)
         return fusion.xyyaw, fusion.P
+
+    def _reacquire(self, P: np.ndarray, innovation: float) -> np.ndarray | None:
+        """P with the yaw variance the walls' persistent disagreement calls for, or None
+        while they have not disagreed alike often enough (a robot that turned into new
+        ground on odometry alone registers its frames to the map it built meanwhile, and
+        the gate, trusting that, rejects every wall heading that would bring it back)."""
+        k = self.params.reacquire_frames
+        if k is None:
+            return None
+        self._rejected = self._rejected[-(k - 1):] + [innovation] if k > 1 else [innovation]
+        recent = np.array(self._rejected)
+        if len(recent) < k or np.ptp(recent) > self.params.reacquire_spread_rad:
+            return None
+        self._rejected = []
+        P = P.copy()
+        P[2, 2] += float(np.mean(recent)) ** 2
+        return P
