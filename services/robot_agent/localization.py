@@ -316,7 +316,8 @@ class Localizer:
                       T_odom_base: np.ndarray) -> np.ndarray:
         """The guess after the heading the frame's walls give; T_loc_odom takes it up."""
         xyyaw, self.P = self.walls.update(np.array(xyyaw_from_T(guess)), self.P,
-                                          cloud.points()[:, :3], np.asarray(cloud.covs()))
+                                          cloud.points()[:, :3], np.asarray(cloud.covs()),
+                                          xyyaw_from_T(T_odom_base)[2])
         guess = T_from_xyyaw(*xyyaw)
         self.T_loc_odom = planar(guess @ invert(T_odom_base))
         return guess

@@ -60,7 +60,7 @@ class WallHeadingParams:
     # teammates' learned directions (one world, one direction): a robot whose own lies more
     # than this from the robots' median takes the mean of those within it; None: own only
     team_inlier_rad: float | None = np.radians(0.3)
-    # this many measurements in a row rejected by the gate, their innovations within
+    # this many measurements in a row rejected by the gate, their offsets from odometry within
     # `reacquire_spread_rad` of each other: the filter's heading is wrong, not the walls
     # (every frame's walls agree); P's yaw variance grows to take them. None: never
     reacquire_frames: int | None = None
@@ -246,8 +246,10 @@ class WallHeading:
         return world, P
 
     def update(self, xyyaw: np.ndarray, P: np.ndarray, points_base: np.ndarray,
-               covs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(x, y, yaw) and P after this frame's walls (unchanged when they say nothing)."""
+               covs: np.ndarray, yaw_odom: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """(x, y, yaw) and P after this frame's walls (unchanged when they say nothing).
+        `yaw_odom`: the frame's odometry heading, against which rejected headings are
+        compared for re-acquisition (the estimate itself may jump meanwhile)."""
         self.n_frames += 1
         direction = wall_direction(points_base, covs, self.params)
         if direction is None:
@@ -269,26 +271,28 @@ class WallHeading:
             self._rejected = []
             return fusion.xyyaw, fusion.P
         self.n_rejected += 1
-        P = self._reacquire(P, float(wrap_angle(yaw - xyyaw[2])))
+        P = self._reacquire(P, float(wrap_angle(yaw - xyyaw[2])),
+                            float(wrap_angle(yaw - yaw_odom)))
         if P is None:
             return xyyaw, fusion.P
         self.n_reacquired += 1
         fusion = fuse_heading(xyyaw, P, yaw, direction.sigma_rad, np.inf)
         return fusion.xyyaw, fusion.P
 
-    def _reacquire(self, P: np.ndarray, innovation: float) -> np.ndarray | None:
+    def _reacquire(self, P: np.ndarray, innovation: float, offset: float) -> np.ndarray | None:
         """P with the yaw variance the walls' persistent disagreement calls for, or None
-        while they have not disagreed alike often enough (a robot that turned into new
-        ground on odometry alone registers its frames to the map it built meanwhile, and
+        while they have not disagreed alike often enough: `reacquire_frames` rejected
+        headings in a row whose offsets from odometry's heading (`offset`) agree (a robot
+        that turned into new ground registers its frames to the map it built meanwhile, and
         the gate, trusting that, rejects every wall heading that would bring it back)."""
         k = self.params.reacquire_frames
         if k is None:
             return None
-        self._rejected = self._rejected[-(k - 1):] + [innovation] if k > 1 else [innovation]
+        self._rejected = (self._rejected[-(k - 1):] if k > 1 else []) + [offset]
         recent = np.array(self._rejected)
         if len(recent) < k or np.ptp(recent) > self.params.reacquire_spread_rad:
             return None
         self._rejected = []
         P = P.copy()
-        P[2, 2] += float(np.mean(recent)) ** 2
+        P[2, 2] += innovation**2
         return P
