@@ -46,6 +46,20 @@ def test_driving_widens_what_a_registration_may_correct() -> None:
     assert np.allclose(fused.P, fused.P.T)
 
 
+def test_a_far_off_registration_is_rejected_however_unsure_it_says_it_is_sideways() -> None:
+    """Warehouse, robot 9: a registration 38 cm to the side with a large R along it and a
+    confident 3.7° yaw passed the χ² gate (yaw σ was 1.6° after a hidden turn) and its yaw
+    went in. With `max_jump_sigmas` the position's distance from the prediction decides."""
+    P = np.diag([0.017**2, 0.016**2, math.radians(1.56) ** 2])
+    R = np.diag([0.01**2, 0.3**2, math.radians(0.1) ** 2])  # sure in x and yaw, not in y
+    meas = np.array([0.049, -0.385, math.radians(3.74)])
+    assert fuse(np.zeros(3), P, meas, R, PARAMS).accepted
+    guarded = replace(PARAMS, max_jump_sigmas=4.0)
+    assert not fuse(np.zeros(3), P, meas, R, guarded).accepted
+    near = np.array([0.03, 0.05, math.radians(1.0)])  # within 4 σ (17 cm): fused as before
+    assert fuse(np.zeros(3), P, near, R, guarded).accepted
+
+
 def test_yaw_uncertainty_swings_later_motion_sideways() -> None:
     P = np.diag([0.0, 0.0, 0.01**2])
     P2 = predict(P, np.zeros(3), np.array([2.0, 0.0, 0.0]), PARAMS)

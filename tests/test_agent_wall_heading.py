@@ -208,7 +208,7 @@ def test_walls_that_disagree_alike_frame_after_frame_take_a_confident_wrong_head
             walls.update(np.zeros(3), P_small, *_frame(room, truth))
         return walls
 
-    walls, never = learned(params), learned(PARAMS)
+    walls, never = learned(params), learned(WallHeadingParams(reacquire_frames=None))
     wrong = np.array([0.0, 0.0, math.radians(3.0)])
     for _ in range(3):
         kept, P = walls.update(wrong, P_small, *_frame(room, truth))

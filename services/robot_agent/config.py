@@ -80,6 +80,10 @@ class AgentConfig(BaseModel):
     reg_reacquire_rad_per_rad: float = Field(
         default=0.03, ge=0, description="re-acquisition: how far (rad per rad turned) the "
         "drift rejected registrations imply may change between them (odometry turn error)")
+    reg_max_jump_sigmas: float = Field(
+        default=0.0, ge=0, description="a registration whose position lies more than this many "
+        "σ (P's position, floored at 3 cm) from the filter's prediction is rejected whatever "
+        "its own covariance (a GICP local minimum); 0 = the χ² gate alone")
     reg_max_corr_m: float = Field(
         default=0.3, gt=0, description="GICP's largest correspondence distance, m; the voxel "
         "map looks only in the voxel a point falls in, so above its diagonal (8.7 cm at 5 cm) "
@@ -118,7 +122,7 @@ class AgentConfig(BaseModel):
         "with their poses) takes the mean of those within it instead, rad (0.3°); 0 = each "
         "robot its own")
     reg_wall_reacquire_frames: int = Field(
-        default=0, ge=0, description="with reg_wall_heading: this many wall headings in a row "
+        default=5, ge=0, description="with reg_wall_heading: this many wall headings in a row "
         "rejected by the χ² gate and agreeing within 0.5° make the filter take them (its yaw "
         "variance grows by their mean innovation squared); 0 = never")
     reg_use_unconverged: bool = Field(

@@ -50,6 +50,12 @@ class FilterParams:
     # measurement: R grows by full_overlap_frac / inlier fraction (0 = never)
     full_overlap_frac: float = 0.0
     reacquire_m_per_m: float = 0.0
+    # a registration whose position lies further from the prediction than this many σ of
+    # P's position (floored at jump_floor_m) is rejected whatever its own R says: a GICP
+    # local minimum 38 cm off with a large R along it passed the χ² gate, and its confident
+    # yaw (3.7° wrong) went in (warehouse, 24 robots). 0 = no such test
+    max_jump_sigmas: float = 0.0
+    jump_floor_m: float = 0.03
 
 
 def predict(P: np.ndarray, xyyaw_from: np.ndarray, xyyaw_to: np.ndarray,
@@ -145,7 +151,7 @@ def fuse(xyyaw_guess: np.ndarray, P: np.ndarray, xyyaw_meas: np.ndarray, R: np.n
     innovation[2] = wrap_angle(innovation[2])
     S = P + R
     d2 = float(innovation @ np.linalg.solve(S, innovation))
-    if d2 > params.chi2_gate:
+    if d2 > params.chi2_gate or _jumped(innovation, P, params):
         return Fusion(np.asarray(xyyaw_guess, float), P, d2, False)
     K = P @ np.linalg.inv(S)
     xyyaw = np.asarray(xyyaw_guess, float) + K @ innovation
@@ -153,6 +159,13 @@ def fuse(xyyaw_guess: np.ndarray, P: np.ndarray, xyyaw_meas: np.ndarray, R: np.n
     I_K = np.eye(3) - K
     P_new = I_K @ P @ I_K.T + K @ R @ K.T  # Joseph form: stays symmetric positive
     return Fusion(xyyaw, P_new, d2, True)
+
+
+def _jumped(innovation: np.ndarray, P: np.ndarray, params: FilterParams) -> bool:
+    if params.max_jump_sigmas <= 0.0:
+        return False
+    sigma_m = float(np.sqrt(P[0, 0] + P[1, 1] + params.jump_floor_m**2))
+    return float(np.hypot(innovation[0], innovation[1])) > params.max_jump_sigmas * sigma_m
 
 
 def agree(xyyaw_reg: list[np.ndarray], xyyaw_odom: list[np.ndarray],

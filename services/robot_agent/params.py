@@ -30,6 +30,7 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
                             coupled_length_m=cfg.reg_coupled_length_m,
                             r_m=cfg.reg_sigma_m, r_rad=cfg.reg_sigma_rad,
                             full_overlap_frac=cfg.reg_full_overlap_frac,
+                            max_jump_sigmas=cfg.reg_max_jump_sigmas,
                             q_rad2_per_rad=cfg.odom_turn_sigma_per_sqrt_rad**2,
                             q_rad2_per_m=cfg.odom_heading_sigma_per_sqrt_m**2)
         if cfg.reg_fusion == "filter" else None,

@@ -63,7 +63,7 @@ class WallHeadingParams:
     # this many measurements in a row rejected by the gate, their offsets from odometry within
     # `reacquire_spread_rad` of each other: the filter's heading is wrong, not the walls
     # (every frame's walls agree); P's yaw variance grows to take them. None: never
-    reacquire_frames: int | None = None
+    reacquire_frames: int | None = 5
     reacquire_spread_rad: float = np.radians(0.5)
 
 
