@@ -70,6 +70,9 @@ class RegistrationParams:
     # frame that did (0 = every frame); fewer inserts, fewer registration errors built in
     insert_min_m: float = 0.0
     insert_min_rad: float = 0.0
+    # when the walls take the heading back (wall_heading.py, re-acquisition), the frames'
+    # map is forgotten: it was built at the wrong heading and would pull it back
+    reset_on_wall_reacquire: bool = False
     # with the filter: learn odometry's scale, turn scale and heading bias from segments
     # between good registrations, and correct the odometry by them (None = raw odometry)
     calibration: CalibrationParams | None = None
@@ -122,6 +125,16 @@ class FrameRegistrar:
         self.T_odom_accepted: np.ndarray | None = None  # odometry at the last accepted one
         self.n_accepted = 0
         self.T_inserted: np.ndarray | None = None  # pose of the last frame inserted
+
+    def reset(self) -> None:
+        """Forget the map: it was built at a heading now known to be wrong, and aligning to
+        it would pull the heading back (the next frame starts a new one)."""
+        p = self.params
+        self.voxelmap = LazyLruVoxelMap(p.map_voxel_m, p.map_horizon)
+        self.coarse = (LazyLruVoxelMap(p.coarse_voxel_m, p.map_horizon)
+                       if p.coarse_voxel_m > 0 else None)
+        self.n_inserted = 0
+        self.T_inserted = None
 
     def _cloud(self, points_base: np.ndarray) -> small_gicp.PointCloud | None:
         out = self.cloud_tree(points_base)
@@ -315,9 +328,13 @@ class Localizer:
     def _wall_heading(self, cloud: small_gicp.PointCloud, guess: np.ndarray,
                       T_odom_base: np.ndarray) -> np.ndarray:
         """The guess after the heading the frame's walls give; T_loc_odom takes it up."""
+        reacquired = self.walls.n_reacquired
         xyyaw, self.P = self.walls.update(np.array(xyyaw_from_T(guess)), self.P,
                                           cloud.points()[:, :3], np.asarray(cloud.covs()),
                                           xyyaw_from_T(T_odom_base)[2])
+        if self.walls.n_reacquired > reacquired and self.registrar.params.reset_on_wall_reacquire:
+            self.registrar.reset()
+            self._rejected = []
         guess = T_from_xyyaw(*xyyaw)
         self.T_loc_odom = planar(guess @ invert(T_odom_base))
         return guess
