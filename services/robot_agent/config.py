@@ -81,11 +81,11 @@ class AgentConfig(BaseModel):
         default=0.03, ge=0, description="re-acquisition: how far (rad per rad turned) the "
         "drift rejected registrations imply may change between them (odometry turn error)")
     reg_wall_reacquire_reset: bool = Field(
-        default=False, description="with reg_wall_reacquire_frames: when the walls take the "
+        default=True, description="with reg_wall_reacquire_frames: when the walls take the "
         "heading back, the registration map (built at the wrong heading, it would pull it "
         "back) is forgotten and started again from the next frame")
     reg_max_jump_sigmas: float = Field(
-        default=0.0, ge=0, description="a registration whose position lies more than this many "
+        default=4.0, ge=0, description="a registration whose position lies more than this many "
         "σ (P's position, floored at 3 cm) from the filter's prediction is rejected whatever "
         "its own covariance (a GICP local minimum); 0 = the χ² gate alone")
     reg_max_corr_m: float = Field(
