@@ -118,23 +118,19 @@ class FrameRegistrar:
 
     def __init__(self, params: RegistrationParams) -> None:
         self.params = params
-        self.voxelmap = LazyLruVoxelMap(params.map_voxel_m, params.map_horizon)
-        self.coarse = (LazyLruVoxelMap(params.coarse_voxel_m, params.map_horizon)
-                       if params.coarse_voxel_m > 0 else None)
-        self.n_inserted = 0
         self.T_odom_accepted: np.ndarray | None = None  # odometry at the last accepted one
         self.n_accepted = 0
-        self.T_inserted: np.ndarray | None = None  # pose of the last frame inserted
+        self.reset()
 
     def reset(self) -> None:
-        """Forget the map: it was built at a heading now known to be wrong, and aligning to
-        it would pull the heading back (the next frame starts a new one)."""
+        """An empty map (also to forget one built at a heading now known to be wrong, which
+        aligning to would pull the heading back: the next frame starts a new one)."""
         p = self.params
         self.voxelmap = LazyLruVoxelMap(p.map_voxel_m, p.map_horizon)
         self.coarse = (LazyLruVoxelMap(p.coarse_voxel_m, p.map_horizon)
                        if p.coarse_voxel_m > 0 else None)
         self.n_inserted = 0
-        self.T_inserted = None
+        self.T_inserted: np.ndarray | None = None  # pose of the last frame inserted
 
     def _cloud(self, points_base: np.ndarray) -> small_gicp.PointCloud | None:
         out = self.cloud_tree(points_base)
