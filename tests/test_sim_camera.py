@@ -121,6 +121,26 @@ def test_segmentation_labels_a_teammate_ahead() -> None:
     sim.close()
 
 
+@pytest.mark.parametrize("backend", ["gl", "raycast"])
+def test_hidden_robots_leave_the_wall_behind_them(backend: str) -> None:
+    # The ablation `robots_visible=False`: where the teammate stood, the camera sees past it.
+    cfg = SimConfig(world="house", robots=2, spawn=[(6.0, 1.5, 0.0), (7.5, 1.5, 0.0)],
+                    sensors="ideal", render_backend=backend)
+    seen_sim = Simulation(cfg)
+    hidden_sim = Simulation(cfg.model_copy(update={"robots_visible": False}))
+    seen, hidden = seen_sim.render(0, segmentation=True), hidden_sim.render(0, segmentation=True)
+    robot_geoms = [g for r in seen_sim.robots for g in r.geoms]
+    teammate = np.isin(seen.segmentation, seen_sim.robots[1].geoms)
+    assert teammate.sum() > 50
+    assert not np.isin(hidden.segmentation, robot_geoms).any()
+    front, behind = seen.depth_m[teammate], hidden.depth_m[teammate]
+    returns = behind > 0  # floor and wall behind the teammate, or nothing within range
+    assert (behind[returns] > front[returns]).all()
+    assert np.median(behind[returns] - front[returns]) > 0.3
+    seen_sim.close()
+    hidden_sim.close()
+
+
 def test_auto_backend_falls_back_to_ray_casting_and_logs_it(
     monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:

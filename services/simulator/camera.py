@@ -22,7 +22,7 @@ import numpy as np
 
 from services.simulator.robots import RobotIds, T_base_cammj
 from services.simulator.sensor_model import PRESETS, SensorModel, apply_depth_model
-from services.simulator.worlds import SENSED_GROUPS
+from services.simulator.worlds import ROBOT_GROUP, SENSED_GROUPS
 
 log = logging.getLogger(__name__)
 
@@ -32,6 +32,13 @@ NEAR_PLANE_M = 0.01  # nothing closer than ~5 cm may be clipped
 PLANE_GRID_M = 2.0
 T_CAMMJ_CAM = np.diag([1.0, -1.0, -1.0, 1.0])  # optical frame in MuJoCo's camera frame
 GEOMGROUP = np.array([1 if g in SENSED_GROUPS else 0 for g in range(6)], dtype=np.uint8)
+
+
+def sensed_groups(robots_visible: bool = True) -> np.ndarray:
+    """MuJoCo geom-group mask of what the camera sees (robots hidden: an ablation only)."""
+    mask = GEOMGROUP.copy()
+    mask[ROBOT_GROUP] = 1 if robots_visible else 0
+    return mask
 
 Backend = Literal["auto", "gl", "raycast"]
 
@@ -96,8 +103,10 @@ class RgbdCamera:
         range_m: float,
         sensors: SensorModel = PRESETS["ideal"],
         backend: Backend = "auto",
+        robots_visible: bool = True,
     ) -> None:
         self.model = model
+        self._geomgroup = sensed_groups(robots_visible)
         self.width, self.height = width, height
         self.range_m = range_m
         self.sensors = sensors
@@ -132,7 +141,7 @@ class RgbdCamera:
         self._scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = False
         self._scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = False
         self._opt = mujoco.MjvOption()
-        self._opt.geomgroup[:] = GEOMGROUP
+        self._opt.geomgroup[:] = self._geomgroup
         self._cam = mujoco.MjvCamera()
         self._cam.type = mujoco.mjtCamera.mjCAMERA_FIXED
         self._rect = mujoco.MjrRect(0, 0, self.width, self.height)
@@ -198,7 +207,7 @@ class RgbdCamera:
         R_world_cammj = data.cam_xmat[ids.camera].reshape(3, 3)
         dirs_world = self._dirs_cammj @ R_world_cammj.T
         mujoco.mj_multiRay(
-            self.model, data, data.cam_xpos[ids.camera].copy(), dirs_world.ravel(), GEOMGROUP,
+            self.model, data, data.cam_xpos[ids.camera].copy(), dirs_world.ravel(), self._geomgroup,
             1, ids.body, self._geomid, self._dist, self._normal, len(dirs_world), self._cutoff,
         )
         hit = self._geomid >= 0

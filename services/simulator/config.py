@@ -67,6 +67,10 @@ class SimConfig(BaseModel):
     render_backend: Literal["auto", "gl", "raycast"] = Field(
         default="auto", description="auto = offscreen GL, ray casting when no GL context"
     )
+    robots_visible: bool = Field(
+        default=True, description="False: cameras do not see robots at all (an ablation: the "
+        "map a perfect Dynamic Robot Filter would allow; never a mission setting)"
+    )
     odom_scale_error: float = Field(default=0.02, description="relative distance error")
     odom_yaw_scale_error: float = Field(default=0.01, description="relative turn error")
     odom_heading_bias_rad_per_m: float = Field(default=0.005, description="yaw drift per metre")

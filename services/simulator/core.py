@@ -159,7 +159,7 @@ class Simulation:
             cfg = self.cfg
             self._camera = RgbdCamera(
                 self.model, cfg.width, cfg.height, cfg.range_m, self.sensors,
-                cfg.render_backend,
+                cfg.render_backend, cfg.robots_visible,
             )
         return self._camera
 
