@@ -167,6 +167,9 @@ class AgentConfig(BaseModel):
         "which the calibration learns)")
     odom_calibration_segment_m: float = Field(
         default=1.0, gt=0, description="a calibration segment closes after this much driving")
+    reg_align_max_range_m: float = Field(
+        default=0.0, ge=0, description="register a frame with its points within this range "
+        "only (m; 0 = all); it joins the map whole")
     reg_min_points: int = Field(
         default=30, ge=10, description="points a frame needs (after 8 cm voxels) to register"
     )

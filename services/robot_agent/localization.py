@@ -61,6 +61,11 @@ class RegistrationParams:
     floor_z_m: float = 0.03  # floor points carry no planar information: dropped
     map_horizon: int = 100  # map voxels not re-observed in this many inserted frames are dropped
     max_removed_frac: float = 0.35  # no registration of frames the DRF took more of
+    # with the filter: a frame registers with its points within this horizontal range only
+    # (m; 0 = all) and joins the map with all of them, so what it aligns lies inside the
+    # map: the map's far edge holds half-seen voxels whose means sit toward where the robot
+    # was, and along an aisle they pull every frame back (0.2-0.3 % of the distance driven)
+    align_max_range_m: float = 0.0
     degenerate_ratio: float = 0.0  # weakest / strongest translation information below this:
     # the correction along the weak direction is dropped (0 = never)
     # a Kalman filter on the pose (drift_filter.py) instead of the jump gate; frames it
@@ -313,7 +318,7 @@ class Localizer:
         if hidden:
             outcome = RegistrationOutcome(guess, False, "hidden by teammates")
         elif filt is not None:
-            outcome = self._filtered(frame, guess, filt)
+            outcome = self._filtered(frame, guess, filt, self._align_cloud(points_base))
         else:
             outcome = self.registrar.register(points_base, guess, T_odom_base)
         self.outcomes["accepted" if outcome.accepted else outcome.reason] += 1
@@ -364,9 +369,19 @@ class Localizer:
         return T_odom_base, replace(filt, q_rad2=q_odom * q_scan / (q_odom + q_scan),
                                     q_rad2_per_rad=0.0, q_rad2_per_m=0.0)
 
+    def _align_cloud(self, points_base: np.ndarray) -> small_gicp.PointCloud | None:
+        """The frame's points within `align_max_range_m`, downsampled (None: all of them)."""
+        max_range = self.registrar.params.align_max_range_m
+        if max_range <= 0:
+            return None
+        near = np.hypot(points_base[:, 0], points_base[:, 1]) <= max_range
+        return self.registrar._cloud(points_base[near])
+
     def _filtered(self, frame: tuple[small_gicp.PointCloud, small_gicp.KdTree] | None,
-                  guess: np.ndarray, filt: FilterParams) -> RegistrationOutcome:
-        """Register, fuse with the odometry guess by the filter, insert what it accepts."""
+                  guess: np.ndarray, filt: FilterParams,
+                  align_cloud: small_gicp.PointCloud | None = None) -> RegistrationOutcome:
+        """Register (`align_cloud` when given), fuse with the odometry guess by the filter,
+        insert what it accepts (the whole frame)."""
         reg = self.registrar
         if frame is None:
             return RegistrationOutcome(guess, False, "too few points")
@@ -374,7 +389,7 @@ class Localizer:
         if reg.n_inserted == 0:
             reg.insert(cloud, guess)
             return RegistrationOutcome(guess, False, "empty map")
-        aligned = reg.align(cloud, guess)
+        aligned = reg.align(cloud if align_cloud is None else align_cloud, guess)
         if isinstance(aligned, str):  # new ground the map does not cover yet: keep odometry
             if aligned != "not converged" or reg.params.insert_unconverged:
                 reg.insert(cloud, guess)
