@@ -167,6 +167,10 @@ class AgentConfig(BaseModel):
         "which the calibration learns)")
     odom_calibration_segment_m: float = Field(
         default=1.0, gt=0, description="a calibration segment closes after this much driving")
+    odom_calibration_max_weak_ratio: float = Field(
+        default=10.0, ge=1, description="a registration ends a calibration segment only when "
+        "its weakest translation direction is at most this many times weaker (variance) than "
+        "its strongest")
     reg_min_points: int = Field(
         default=30, ge=10, description="points a frame needs (after 8 cm voxels) to register"
     )
