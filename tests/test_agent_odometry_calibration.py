@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from services.robot_agent.config import AgentConfig
 from services.robot_agent.odometry_calibration import (
     CalibratedOdometry,
     CalibrationParams,
@@ -14,6 +15,7 @@ from services.robot_agent.odometry_calibration import (
     corrected_increment,
     is_good_registration,
 )
+from services.robot_agent.params import registration_params
 from services.simulator.odometry import OdometryNoise, WheelOdometry
 
 NOISE = OdometryNoise(scale_error=0.02, yaw_scale_error=0.01, heading_bias_rad_per_m=0.005,
@@ -106,6 +108,14 @@ def test_frames_of_one_wall_or_new_ground_end_no_segment() -> None:
     assert is_good_registration(0.9, round_R, params)
     assert not is_good_registration(0.9, aisle_R, params)
     assert not is_good_registration(0.5, round_R, params)
+
+
+def test_how_weak_a_segment_end_may_be_is_the_agent_config() -> None:
+    half_aisle_R = np.diag([2e-3, 1e-4, 1e-5])  # 20 times weaker along x
+    for ratio, good in ((10.0, False), (30.0, True)):
+        params = registration_params(AgentConfig(odom_calibration_max_weak_ratio=ratio))
+        assert params.calibration is not None
+        assert bool(is_good_registration(0.9, half_aisle_R, params.calibration)) is good
 
 
 def test_the_localizer_learns_the_scale_of_wheels_that_over_read() -> None:

@@ -170,6 +170,10 @@ class AgentConfig(BaseModel):
     reg_align_max_range_m: float = Field(
         default=0.0, ge=0, description="register a frame with its points within this range "
         "only (m; 0 = all); it joins the map whole")
+    odom_calibration_max_weak_ratio: float = Field(
+        default=10.0, ge=1, description="a registration ends a calibration segment only when "
+        "its weakest translation direction is at most this many times weaker (variance) than "
+        "its strongest")
     reg_min_points: int = Field(
         default=30, ge=10, description="points a frame needs (after 8 cm voxels) to register"
     )

@@ -36,7 +36,8 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
                             q_rad2_per_rad=cfg.odom_turn_sigma_per_sqrt_rad**2,
                             q_rad2_per_m=cfg.odom_heading_sigma_per_sqrt_m**2)
         if cfg.reg_fusion == "filter" else None,
-        calibration=CalibrationParams(segment_m=cfg.odom_calibration_segment_m)
+        calibration=CalibrationParams(segment_m=cfg.odom_calibration_segment_m,
+                                      max_weak_ratio=cfg.odom_calibration_max_weak_ratio)
         if cfg.odom_calibration else None,
         scan_odometry=ScanOdometryParams(sigma_rad=cfg.reg_scan_sigma_rad)
         if cfg.reg_scan_heading else None,
