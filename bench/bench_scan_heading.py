@@ -23,9 +23,9 @@ from bench_localization import load_or_record  # noqa: E402
 from services.common.geometry import T_from_xyyaw, wrap_angle  # noqa: E402
 from services.evaluator.evaluate import RunConfig  # noqa: E402
 from services.robot_agent.config import AgentConfig  # noqa: E402
-from services.robot_agent.localization import FrameRegistrar  # noqa: E402
 from services.robot_agent.params import registration_params  # noqa: E402
 from services.robot_agent.projection import cam_to_base, depth_to_points  # noqa: E402
+from services.robot_agent.registrar import FrameRegistrar  # noqa: E402
 from services.robot_agent.scan_odometry import ScanOdometry, ScanOdometryParams  # noqa: E402
 from services.simulator.core import odometry_noise  # noqa: E402
 from services.simulator.odometry import WheelOdometry  # noqa: E402

@@ -21,9 +21,9 @@ import numpy as np  # noqa: E402
 from bench_localization import load_or_record  # noqa: E402
 
 from services.robot_agent.config import AgentConfig  # noqa: E402
-from services.robot_agent.localization import FrameRegistrar  # noqa: E402
 from services.robot_agent.params import registration_params  # noqa: E402
 from services.robot_agent.projection import cam_to_base, depth_to_points  # noqa: E402
+from services.robot_agent.registrar import FrameRegistrar  # noqa: E402
 from services.robot_agent.wall_heading import WallHeadingParams, fold, wall_direction  # noqa: E402
 
 

@@ -9,7 +9,8 @@ import numpy as np
 
 from services.common.geometry import T_from_xyyaw, invert, transform_points, xyyaw_from_T
 from services.robot_agent.drift_filter import FilterParams, agree, fuse, measurement_cov, predict
-from services.robot_agent.localization import Localizer, RegistrationParams
+from services.robot_agent.localization import Localizer
+from services.robot_agent.registrar import RegistrationParams
 from tests.test_agent_localization import _corridor, _hessian, _room, _seen, _wall
 
 PARAMS = FilterParams()

@@ -98,7 +98,7 @@ def test_registration_gate_follows_the_odometry_error_model() -> None:
     """A 4 cm correction right after an accepted one is a GICP slide, not drift: rejected;
     after 0.5 m of odometry since the last acceptance, drift can explain it: accepted."""
     from services.common.geometry import T_from_xyyaw
-    from services.robot_agent.localization import FrameRegistrar, RegistrationParams
+    from services.robot_agent.registrar import FrameRegistrar, RegistrationParams
 
     pose = (0.5, 0.3, 0.4)
     pts = _points_base(pose)

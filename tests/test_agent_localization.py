@@ -9,7 +9,8 @@ import small_gicp
 
 from services.common.geometry import T_from_xyyaw, invert, transform_points, xyyaw_from_T
 from services.robot_agent.drift_filter import drop_weak_translation
-from services.robot_agent.localization import Localizer, RegistrationParams
+from services.robot_agent.localization import Localizer
+from services.robot_agent.registrar import RegistrationParams
 
 
 def _wall(x0: float, y0: float, x1: float, y1: float, rng: np.random.Generator) -> np.ndarray:

@@ -13,7 +13,8 @@ import numpy as np
 
 from services.common.geometry import T_from_xyyaw, invert, transform_points, xyyaw_from_T
 from services.robot_agent.drift_filter import FilterParams
-from services.robot_agent.localization import FrameRegistrar, Localizer, RegistrationParams
+from services.robot_agent.localization import Localizer
+from services.robot_agent.registrar import FrameRegistrar, RegistrationParams
 
 RANGE_M = 5.0
 NOISE_PER_M2 = 0.0005

@@ -123,7 +123,8 @@ def test_the_localizer_learns_the_scale_of_wheels_that_over_read() -> None:
     registrations teach it the scale, and its odometry guess is then corrected."""
     from services.common.geometry import T_from_xyyaw, xyyaw_from_T
     from services.robot_agent.drift_filter import FilterParams
-    from services.robot_agent.localization import Localizer, RegistrationParams
+    from services.robot_agent.localization import Localizer
+    from services.robot_agent.registrar import RegistrationParams
     from tests.test_agent_localization import _room, _seen
 
     room = _room(np.random.default_rng(4))

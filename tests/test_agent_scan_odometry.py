@@ -9,7 +9,8 @@ import small_gicp
 
 from services.common.geometry import T_from_xyyaw, invert, transform_points, xyyaw_from_T
 from services.robot_agent.drift_filter import FilterParams
-from services.robot_agent.localization import Localizer, RegistrationParams
+from services.robot_agent.localization import Localizer
+from services.robot_agent.registrar import RegistrationParams
 from services.robot_agent.scan_odometry import ScanOdometry, ScanOdometryParams
 from tests.test_agent_localization import _wall
 

@@ -232,7 +232,8 @@ def _heading_after_reacquiring(reset: bool) -> list[float]:
     """Yaw (deg) per frame of a localizer whose registration map was built 3° off, standing
     still in a room while its walls say so; the walls re-acquire after 3 frames."""
     from services.robot_agent.drift_filter import FilterParams
-    from services.robot_agent.localization import Localizer, RegistrationParams
+    from services.robot_agent.localization import Localizer
+    from services.robot_agent.registrar import RegistrationParams
     rng = np.random.default_rng(2)
     room = _room(rng, 0.002)
     params = RegistrationParams(

@@ -7,8 +7,8 @@ from typing import TYPE_CHECKING
 from services.robot_agent.config import AgentConfig
 from services.robot_agent.drf import DrfParams
 from services.robot_agent.drift_filter import FilterParams
-from services.robot_agent.localization import RegistrationParams
 from services.robot_agent.odometry_calibration import CalibrationParams
+from services.robot_agent.registrar import RegistrationParams
 from services.robot_agent.scan_odometry import ScanOdometryParams
 from services.robot_agent.wall_heading import WallHeadingParams
 
