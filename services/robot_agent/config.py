@@ -170,6 +170,9 @@ class AgentConfig(BaseModel):
     reg_align_max_range_m: float = Field(
         default=0.0, ge=0, description="register a frame with its points within this range "
         "only (m; 0 = all); it joins the map whole")
+    odom_calibration_prior_segments: float = Field(
+        default=2.0, ge=0, description="the calibration's prior at 'no error' weighs this many "
+        "1 m segments (fewer: learned sooner, trusting the first segments more)")
     odom_calibration_max_weak_ratio: float = Field(
         default=10.0, ge=1, description="a registration ends a calibration segment only when "
         "its weakest translation direction is at most this many times weaker (variance) than "

@@ -37,7 +37,8 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
                             q_rad2_per_m=cfg.odom_heading_sigma_per_sqrt_m**2)
         if cfg.reg_fusion == "filter" else None,
         calibration=CalibrationParams(segment_m=cfg.odom_calibration_segment_m,
-                                      max_weak_ratio=cfg.odom_calibration_max_weak_ratio)
+                                      max_weak_ratio=cfg.odom_calibration_max_weak_ratio,
+                                      prior_segments=cfg.odom_calibration_prior_segments)
         if cfg.odom_calibration else None,
         scan_odometry=ScanOdometryParams(sigma_rad=cfg.reg_scan_sigma_rad)
         if cfg.reg_scan_heading else None,
