@@ -28,6 +28,7 @@ from services.common.registration import (
     register,
     world_box,
 )
+from services.edge_server.config import EdgeConfig
 from services.edge_server.consistency import ConsistencyParams, select
 from services.edge_server.submap_store import StoredSubmap, SubmapKey, SubmapStore
 
@@ -41,9 +42,17 @@ class MergerParams:
     prior_info: np.ndarray = field(default_factory=lambda: info_diag([1e-3] * 3, [1e-3] * 3))
     restart_prior_info: np.ndarray = field(
         default_factory=lambda: info_diag([0.02, 0.02, 0.2], [0.5, 0.5, 0.02]))
-    # planar odometry: roll, pitch and z are nearly exact; x, y and yaw drift
-    odometry_info: np.ndarray = field(
-        default_factory=lambda: info_diag([0.01, 0.01, 0.08], [0.15, 0.15, 0.01]))
+    # planar odometry: roll, pitch and z are nearly exact; x, y and yaw drift, by
+    # σ = base + per metre (x, y) and base + per radian turned (yaw) between the submaps
+    odometry_sigma_m: float = 0.15
+    odometry_sigma_per_m: float = 0.0
+    odometry_sigma_rad: float = 0.08
+    odometry_sigma_rad_per_rad: float = 0.0
+    # every later submap's report as a loose absolute prior (0: none): the agents register
+    # against their own maps from a known start, so their error is bounded, not a random walk
+    report_sigma_m: float = 0.0
+    report_sigma_per_m: float = 0.0  # ... plus this per metre of the robot's chain so far
+    report_sigma_rad: float = 0.02
     min_overlap_m3: float = 0.5
     min_points: int = 200
     max_registrations: int = 2
@@ -52,6 +61,23 @@ class MergerParams:
     registration: RegistrationParams = field(default_factory=RegistrationParams)
     # inter-robot edges enter the graph only inside a consistent set (None: every edge)
     consistency: ConsistencyParams | None = field(default_factory=ConsistencyParams)
+
+
+def merger_params(config: EdgeConfig) -> MergerParams:
+    """The merger's parameters from the edge's config section."""
+    return MergerParams(
+        odometry_sigma_m=config.merge_odometry_sigma_m,
+        odometry_sigma_per_m=config.merge_odometry_sigma_per_m,
+        odometry_sigma_rad=config.merge_odometry_sigma_rad,
+        odometry_sigma_rad_per_rad=config.merge_odometry_sigma_rad_per_rad,
+        report_sigma_m=config.merge_report_sigma_m,
+        report_sigma_per_m=config.merge_report_sigma_per_m,
+        report_sigma_rad=config.merge_report_sigma_rad,
+        max_registrations=config.max_registrations,
+        registration=RegistrationParams(sigma_m=config.merge_registration_sigma_m),
+        consistency=ConsistencyParams(
+            tol_m=config.merge_pcm_tol_m, tol_m_per_m=config.merge_pcm_tol_m_per_m,
+            tol_rad=config.merge_pcm_tol_rad, tol_rad_per_m=config.merge_pcm_tol_rad_per_m))
 
 
 def pose_change(T_a: np.ndarray, T_b: np.ndarray) -> tuple[float, float]:
@@ -68,6 +94,8 @@ class MapMerger:
         self.params = params or MergerParams()
         self.priors: dict[SubmapKey, Prior] = {}
         self.odometry: list[Between] = []
+        self.reports: list[Prior] = []
+        self._path_m: dict[tuple[int, int], float] = {}  # (robot, epoch) → chain length so far
         self.registrations: dict[tuple[SubmapKey, SubmapKey], Between | None] = {}
         self.estimates: dict[SubmapKey, np.ndarray] = {}
         self.inliers: dict[tuple[SubmapKey, SubmapKey], bool] = {}
@@ -87,10 +115,26 @@ class MapMerger:
             self.priors[key] = Prior(key, sm.T_reported.copy(), self.params.restart_prior_info)
         else:
             T_world_a = previous.T_world_submap if previous.corrected else previous.T_reported
-            self.odometry.append(Between(previous.key, key, invert(T_world_a) @ sm.T_reported,
-                                         self.params.odometry_info, robust=False))
+            T_a_b = invert(T_world_a) @ sm.T_reported
+            self.odometry.append(Between(previous.key, key, T_a_b, self._odometry_info(T_a_b),
+                                         robust=False))
+            path = self._path_m.get((sm.robot_id, sm.epoch), 0.0) + float(
+                np.linalg.norm(T_a_b[:2, 3]))
+            self._path_m[(sm.robot_id, sm.epoch)] = path
+            if self.params.report_sigma_m > 0:
+                sigma = self.params.report_sigma_m + self.params.report_sigma_per_m * path
+                self.reports.append(Prior(key, sm.T_reported.copy(), info_diag(
+                    [0.01, 0.01, self.params.report_sigma_rad], [sigma, sigma, 0.01])))
         epochs.add(sm.epoch)
         self._dirty = True
+
+    def _odometry_info(self, T_a_b: np.ndarray) -> np.ndarray:
+        """Planar odometry information, looser the further and the more the robot turned."""
+        p = self.params
+        turned = abs(float(np.arctan2(T_a_b[1, 0], T_a_b[0, 0])))
+        sigma_xy = p.odometry_sigma_m + p.odometry_sigma_per_m * float(np.linalg.norm(T_a_b[:2, 3]))
+        sigma_yaw = p.odometry_sigma_rad + p.odometry_sigma_rad_per_rad * turned
+        return info_diag([0.01, 0.01, sigma_yaw], [sigma_xy, sigma_xy, 0.01])
 
     def _cached(self, sm: StoredSubmap) -> tuple[int, np.ndarray, np.ndarray]:
         cached = self._points.get(sm.key)
@@ -170,7 +214,8 @@ class MapMerger:
         edges = [e for e, ok in zip(edges, kept, strict=True) if ok]
         if not edges:
             return {}
-        result = optimize(self.estimates, list(self.priors.values()), self.odometry + edges)
+        result = optimize(self.estimates, [*self.priors.values(), *self.reports],
+                          self.odometry + edges)
         self.inliers.update({(e.a, e.b): ok for e, ok in
                              zip(edges, result.inlier[len(self.odometry):], strict=True)})
         self.estimates = result.poses

@@ -152,10 +152,9 @@ class EdgePlanner:
         """The pose-graph merger, made on first use: it alone needs gtsam, whose import costs
         the edge 0.3 s of CPU at every start when `merge` is off."""
         if self._merger is None:
-            from services.edge_server.merger import MapMerger, MergerParams
+            from services.edge_server.merger import MapMerger, merger_params
 
-            self._merger = MapMerger(
-                self.config.voxel_m, MergerParams(max_registrations=self.config.max_registrations))
+            self._merger = MapMerger(self.config.voxel_m, merger_params(self.config))
         return self._merger
 
     def robot_grid(self, robot_id: int, tick: int) -> OccupancyGrid | None:
