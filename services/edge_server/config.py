@@ -110,13 +110,13 @@ class EdgeConfig(BaseModel):
                         "and cost plan time, docs/edge.md)")
     max_registrations: int = Field(default=1, ge=0, description="pair registrations per plan")
     merge_odometry_sigma_m: float = Field(
-        default=0.15, gt=0, description="σ x, y of the odometry edge between consecutive submaps")
+        default=0.01, gt=0, description="σ x, y of the odometry edge between consecutive submaps")
     merge_odometry_sigma_per_m: float = Field(
-        default=0.0, ge=0, description="... plus this per metre between them")
+        default=0.01, ge=0, description="... plus this per metre between them")
     merge_odometry_sigma_rad: float = Field(
-        default=0.08, gt=0, description="σ yaw of the odometry edge between consecutive submaps")
+        default=0.003, gt=0, description="σ yaw of the odometry edge between consecutive submaps")
     merge_odometry_sigma_rad_per_rad: float = Field(
-        default=0.0, ge=0, description="... plus this per radian turned between them")
+        default=0.01, ge=0, description="... plus this per radian turned between them")
     merge_report_sigma_m: float = Field(
         default=0.0, ge=0, description="σ x, y of an absolute prior at every submap's reported "
         "pose (0: none, the chain alone carries the reports)")
@@ -127,12 +127,15 @@ class EdgeConfig(BaseModel):
         default=0.05, gt=0, description="PCM: two registrations agree when the loop they close "
         "through both robots' reported chains is within this ...")
     merge_pcm_tol_m_per_m: float = Field(
-        default=0.02, ge=0, description="... plus this per metre the loop spans")
+        default=0.005, ge=0, description="... plus this per metre the loop spans")
     merge_pcm_tol_rad: float = Field(default=0.02, gt=0, description="PCM loop rotation ...")
     merge_pcm_tol_rad_per_m: float = Field(
         default=0.005, ge=0, description="... plus this per metre the loop spans")
+    merge_pcm_min_clique: int = Field(
+        default=2, ge=1, description="PCM: a robot pair's registrations are used once this many "
+        "agree (1: a lone registration is trusted)")
     merge_registration_sigma_m: float = Field(
-        default=0.01, gt=0, description="a registration edge's information is scaled to this "
+        default=0.03, gt=0, description="a registration edge's information is scaled to this "
         "mean translational σ (its shape is the registration's Hessian)")
     # assignment
     keep_radius_m: float = Field(

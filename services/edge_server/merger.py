@@ -44,10 +44,10 @@ class MergerParams:
         default_factory=lambda: info_diag([0.02, 0.02, 0.2], [0.5, 0.5, 0.02]))
     # planar odometry: roll, pitch and z are nearly exact; x, y and yaw drift, by
     # σ = base + per metre (x, y) and base + per radian turned (yaw) between the submaps
-    odometry_sigma_m: float = 0.15
-    odometry_sigma_per_m: float = 0.0
-    odometry_sigma_rad: float = 0.08
-    odometry_sigma_rad_per_rad: float = 0.0
+    odometry_sigma_m: float = 0.01
+    odometry_sigma_per_m: float = 0.01
+    odometry_sigma_rad: float = 0.003
+    odometry_sigma_rad_per_rad: float = 0.01
     # every later submap's report as a loose absolute prior (0: none): the agents register
     # against their own maps from a known start, so their error is bounded, not a random walk
     report_sigma_m: float = 0.0
@@ -58,9 +58,11 @@ class MergerParams:
     max_registrations: int = 2
     correction_tol_m: float = 0.01
     correction_tol_rad: float = 0.004
-    registration: RegistrationParams = field(default_factory=RegistrationParams)
+    registration: RegistrationParams = field(
+        default_factory=lambda: RegistrationParams(sigma_m=0.03))
     # inter-robot edges enter the graph only inside a consistent set (None: every edge)
-    consistency: ConsistencyParams | None = field(default_factory=ConsistencyParams)
+    consistency: ConsistencyParams | None = field(
+        default_factory=lambda: ConsistencyParams(tol_m_per_m=0.005))
 
 
 def merger_params(config: EdgeConfig) -> MergerParams:
@@ -77,7 +79,8 @@ def merger_params(config: EdgeConfig) -> MergerParams:
         registration=RegistrationParams(sigma_m=config.merge_registration_sigma_m),
         consistency=ConsistencyParams(
             tol_m=config.merge_pcm_tol_m, tol_m_per_m=config.merge_pcm_tol_m_per_m,
-            tol_rad=config.merge_pcm_tol_rad, tol_rad_per_m=config.merge_pcm_tol_rad_per_m))
+            tol_rad=config.merge_pcm_tol_rad, tol_rad_per_m=config.merge_pcm_tol_rad_per_m,
+            min_clique=config.merge_pcm_min_clique))
 
 
 def pose_change(T_a: np.ndarray, T_b: np.ndarray) -> tuple[float, float]:
