@@ -73,3 +73,30 @@ def test_known_box_covers_exactly_the_edge_grids_known_cells() -> None:
     known = np.argwhere(grid.edge != -1)
     assert known.tolist() == [[18, 14], [22, 19]]
     assert (grid.row_lo, grid.row_hi, grid.col_lo, grid.col_hi) == (18, 22, 14, 19)
+
+
+def test_grid_grows_to_cover_a_goal_beyond_it() -> None:
+    """A goal past the grid made at spawn (a world larger than it) grows the grid in whole
+    cells: every known cell keeps its world place and value, the known box moves with the
+    origin, and the edge's cells beyond the old bounds come in at the next merge."""
+    grid = LocalGrid.centred(0.0, 0.0, 2.0, 0.05)
+    grid.update(np.array([[0.52, 0.52], [-1.0, 1.5]]), np.array([[1.2, -0.3]]))
+    before = grid.cells().copy()
+    probe = np.array([[0.52, 0.52], [-1.0, 1.5], [1.2, -0.3], [1.9, 1.9]])
+    values = grid.values_at(grid.spec.cell_of(probe))
+    box = grid.window(0)
+    assert not grid.cover(np.array([[1.9, 1.9]]), 0.5)  # inside: nothing to do
+    assert grid.cover(np.array([[6.0, -4.0]]), 1.0)
+    spec = grid.spec
+    assert spec.contains(spec.cell_of(np.array([[6.99, -5.0], [-2.0, 1.99]]))).all()
+    assert np.isclose(spec.origin_x, -2.0) and np.isclose(spec.origin_y, -5.0)
+    assert np.array_equal(grid.values_at(spec.cell_of(probe)), values)
+    assert (grid.cells() != UNKNOWN).sum() == (before != UNKNOWN).sum()
+    new_box = grid.window(0)
+    shift = round(3.0 / 0.05)  # the origin moved 3 m down in y (rows), 0 in x (cols)
+    assert (new_box[0].start, new_box[0].stop) == (box[0].start + shift, box[0].stop + shift)
+    assert (new_box[1].start, new_box[1].stop) == (box[1].start, box[1].stop)
+    edge_cells = np.full((20, 20), OCCUPIED, np.int8)  # [5, 6) × [-4, -3): beyond the old grid
+    grid.merge_edge(OccupancyGrid(tick=0, resolution_m=0.05, origin_x=5.0, origin_y=-4.0,
+                                  cells=edge_cells))
+    assert grid.values_at(spec.cell_of(np.array([[5.5, -3.5]])))[0] == OCCUPIED

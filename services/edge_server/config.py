@@ -135,7 +135,7 @@ class EdgeConfig(BaseModel):
         default=2, ge=1, description="PCM: a robot pair's registrations are used once this many "
         "agree (1: a lone registration is trusted)")
     merge_registration_sigma_m: float = Field(
-        default=0.03, gt=0, description="a registration edge's information is scaled to this "
+        default=0.05, gt=0, description="a registration edge's information is scaled to this "
         "mean translational σ (its shape is the registration's Hessian)")
     # assignment
     keep_radius_m: float = Field(

@@ -59,7 +59,7 @@ class MergerParams:
     correction_tol_m: float = 0.01
     correction_tol_rad: float = 0.004
     registration: RegistrationParams = field(
-        default_factory=lambda: RegistrationParams(sigma_m=0.03))
+        default_factory=lambda: RegistrationParams(sigma_m=0.05))
     # inter-robot edges enter the graph only inside a consistent set (None: every edge)
     consistency: ConsistencyParams | None = field(
         default_factory=lambda: ConsistencyParams(tol_m_per_m=0.005))

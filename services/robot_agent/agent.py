@@ -276,6 +276,10 @@ class AgentCore:
             self.goal = self.explorer.goal(self.grid, pose_world, tick)
         events: list[StatusEvent] = []
         if self.goal is not None:
+            assert self.grid is not None
+            if self.grid.cover(np.array([[self.goal.x, self.goal.y], pose_world[:2]]),
+                               self.config.grid_half_size_m / 2) and self.edge_grid is not None:
+                self.grid.merge_edge(self.edge_grid)  # the edge's cells beyond the old bounds
             event = self.nav.set_goal(self.goal, tick)
             events += [event] if event is not None else []
             self.goal = None

@@ -229,7 +229,9 @@ class AgentConfig(BaseModel):
     )
     # -- local 2D grid ---------------------------------------------------------------------
     cell_m: float = Field(default=0.05, gt=0, description="2D grid and free-cell size")
-    grid_half_size_m: float = Field(default=25.0, gt=0, description="local grid ± around spawn")
+    grid_half_size_m: float = Field(
+        default=25.0, gt=0, description="local grid ± around spawn; it grows by half this "
+        "around a goal beyond it")
     obstacle_z_min_m: float = Field(default=0.05, description="points above this are obstacles")
     obstacle_z_max_m: float = Field(default=0.6, description="... and below this (robot + margin)")
     # -- navigation ------------------------------------------------------------------------

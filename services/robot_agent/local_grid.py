@@ -66,7 +66,8 @@ def floor_rays(
 
 
 class LocalGrid:
-    """Fixed-bounds world grid: own log-odds layer over the edge's merged grid."""
+    """World grid made around the spawn, grown when a goal lies beyond it: own log-odds layer
+    over the edge's merged grid."""
 
     def __init__(self, spec: GridSpec) -> None:
         self.spec = spec
@@ -80,6 +81,34 @@ class LocalGrid:
     def centred(x: float, y: float, half_size_m: float, cell_m: float) -> LocalGrid:
         lo, hi = np.array([x, y]) - half_size_m, np.array([x, y]) + half_size_m
         return LocalGrid(GridSpec.covering(lo, hi, cell_m))
+
+    def cover(self, xy_world: np.ndarray, margin_m: float) -> bool:
+        """When a (N, 2) point lies outside the grid, grow it (whole cells, same alignment)
+        to hold every point with `margin_m` around it; True when it grew. A world larger than
+        the grid made at spawn (the warehouse is 40 m long) otherwise has goals "outside the
+        local grid"."""
+        spec, cell = self.spec, self.spec.resolution_m
+        xy = np.asarray(xy_world, np.float64).reshape(-1, 2)
+        if spec.contains(spec.cell_of(xy)).all():
+            return False
+        lo = np.floor((xy.min(axis=0) - margin_m - [spec.origin_x, spec.origin_y]) / cell)
+        hi = np.ceil((xy.max(axis=0) + margin_m - [spec.origin_x, spec.origin_y]) / cell)
+        before = np.maximum(-lo, 0).astype(int)  # cells to add below (x, y)
+        after = np.maximum(hi - [spec.width, spec.height], 0).astype(int)
+        if not (before.any() or after.any()):
+            return False
+        pad = ((before[1], after[1]), (before[0], after[0]))  # (rows = y, cols = x)
+        self.logodds = np.pad(self.logodds, pad)
+        self.seen = np.pad(self.seen, pad)
+        self.edge = np.pad(self.edge, pad, constant_values=UNKNOWN)
+        self.spec = GridSpec(spec.origin_x - before[0] * cell, spec.origin_y - before[1] * cell,
+                             cell, *self.logodds.shape)
+        if self.row_hi >= self.row_lo:  # the known box moves with the origin
+            self.row_lo, self.row_hi = self.row_lo + before[1], self.row_hi + before[1]
+            self.col_lo, self.col_hi = self.col_lo + before[0], self.col_hi + before[0]
+        else:
+            self.row_lo, self.col_lo = self.spec.height, self.spec.width
+        return True
 
     def _flat(self, xy_world: np.ndarray) -> np.ndarray:
         rc = self.spec.cell_of(xy_world)
