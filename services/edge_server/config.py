@@ -89,6 +89,13 @@ class EdgeConfig(BaseModel):
         default=40, ge=1, description="... only grid frontier clusters this long (cells; 40 "
         "= 2 m): an unknown room has a frontier of metres, while the rims a normal completion "
         "leaves are short (every rim taken: missions +18 to +39 %; 2 m: +5 %, docs/edge.md)")
+    space_tour: bool = Field(
+        default=False, description="`space`: robots needing a goal take the first stop of a "
+        "min-max tour over every usable region (tours.py) instead of the revenue's best")
+    space_tour_stop_s: float = Field(default=2.0, ge=0, description="seconds a tour counts "
+                                     "at each region (stopping, turning to the next)")
+    space_tour_coarse: int = Field(default=4, ge=1, description="region-to-region times on "
+                                   "the grid coarsened by this factor")
     nav_v_mps: float = Field(default=0.5, gt=0, description="the agents' max_v_mps (the "
                              "mission config copies it)")
     nav_omega_radps: float = Field(default=0.7853981633974483, gt=0,

@@ -26,10 +26,11 @@ from schemas.messages import Goal, GoalStatus
 from services.common.grid import GridSpec
 from services.edge_server.assignment import Scorer
 from services.edge_server.config import EdgeConfig
-from services.edge_server.coordination import RobotStates
+from services.edge_server.coordination import RobotStates, travel_time_s
 from services.edge_server.frontiers import FrontierSet
 from services.edge_server.robot_fields import RobotFields
 from services.edge_server.successors import successor_frontiers
+from services.edge_server.tours import coarse_paths_m, min_max_routes
 
 log = logging.getLogger(__name__)
 
@@ -191,7 +192,12 @@ class GoalBook:
         scores[[i for i, r in enumerate(robots) if r in kept], :] = -np.inf
         new_goals = []
         assigned = dict(kept)
-        for i, f in scorer.match(scores).items():
+        if self.config.planner == "space" and self.config.space_tour:
+            matched = self._tour_match(robots, kept, reach * spec.resolution_m, frontiers,
+                                       usable, spec, fields, poses, scores, scorer)
+        else:
+            matched = scorer.match(scores)
+        for i, f in matched.items():
             assigned[robots[i]] = f
             old = dropped.get(robots[i])
             if robots[i] in self.provisional and old is not None and np.hypot(
@@ -213,6 +219,48 @@ class GoalBook:
             new_goals += self._successors(tick, robots, fields, frontiers, spec, scorer, poses,
                                           usable, assigned)
         return Assignment(dict(sorted(assigned.items())), new_goals, int(usable.sum()))
+
+    def _tour_match(
+        self, robots: list[int], kept: dict[int, int], path_m: np.ndarray,
+        frontiers: FrontierSet, usable: np.ndarray, spec: GridSpec, fields: RobotFields,
+        poses: np.ndarray, scores: np.ndarray, scorer: Scorer,
+    ) -> dict[int, int]:
+        """Row → frontier for robots needing a goal: the first stop of their route in a
+        min-max tour over the free usable regions (tours.py); the revenue's match for a robot
+        whose route is empty."""
+        cfg = self.config
+        need = [i for i, r in enumerate(robots) if r not in kept and np.isfinite(scores[i]).any()]
+        free = usable.copy()
+        free[list(kept.values())] = False
+        cols = np.flatnonzero(free)
+        out: dict[int, int] = {}
+        if need and len(cols):
+            held = [i for i, r in enumerate(robots) if r in kept]
+            goal_rc = frontiers.goal_rc[cols]
+            kept_goal_rc = spec.cell_of(
+                np.array([self.active[robots[i]].goal_xy for i in held]).reshape(-1, 2))
+            kept_robot_rc = spec.cell_of(poses[held, :2].reshape(-1, 2))
+            d = coarse_paths_m(fields.traversable, np.vstack([goal_rc, kept_goal_rc,
+                                                              kept_robot_rc]),
+                               np.vstack([goal_rc, kept_goal_rc]), cfg.space_tour_coarse,
+                               spec.resolution_m)
+            F, K = len(cols), len(held)
+            start = np.vstack([
+                travel_time_s(path_m[np.ix_(need, cols)], poses[need, :2], poses[need, 2],
+                              frontiers.goal_xy[cols], cfg.nav_v_mps, cfg.nav_omega_radps),
+                d[F:F + K, :F] / cfg.nav_v_mps])
+            offset = np.concatenate([np.zeros(len(need)),
+                                     d[F + K + np.arange(K), F + np.arange(K)] / cfg.nav_v_mps])
+            start[len(need):][~np.isfinite(offset[len(need):])] = np.inf
+            offset[~np.isfinite(offset)] = 0.0
+            routes = min_max_routes(start, offset, d[:F, :F] / cfg.nav_v_mps,
+                                    cfg.space_tour_stop_s)
+            out = {need[n]: int(cols[routes[n][0]]) for n in range(len(need)) if routes[n]}
+        rest = scores.copy()
+        rest[list(out), :] = -np.inf
+        rest[:, list(out.values())] = -np.inf
+        out.update(scorer.match(rest))
+        return out
 
     def _successors(
         self, tick: int, robots: list[int], fields: RobotFields, frontiers: FrontierSet,
