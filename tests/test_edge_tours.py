@@ -10,7 +10,7 @@ from services.edge_server.config import EdgeConfig
 from services.edge_server.frontiers import FrontierSet
 from services.edge_server.goals import ActiveGoal, GoalBook
 from services.edge_server.robot_fields import RobotFields
-from services.edge_server.tours import coarse_paths_m, min_max_routes, route_length_s
+from services.edge_server.tours import coarse_paths_m, min_max_routes, route_length_s, two_opt
 
 CELL = 0.1
 
@@ -91,3 +91,10 @@ def test_a_tour_counts_a_teammate_on_its_way_to_the_far_region() -> None:
     got = plan(config, {0: 2, 1: 30}, book)
     assert got[1] == 4 and got[0] in (0, 1, 2, 3)
     assert got[0] == 0  # the near ones in order, from the nearest
+
+
+def test_two_opt_undoes_a_crossing() -> None:
+    xs = np.array([1.0, 2.0, 3.0, 4.0])
+    leg = np.abs(xs[:, None] - xs[None, :])
+    assert two_opt([0, 2, 1, 3], xs, leg) == [0, 1, 2, 3]
+    assert two_opt([3, 2, 1, 0], xs, leg) == [0, 1, 2, 3]  # the end is free: start near

@@ -94,6 +94,9 @@ class EdgeConfig(BaseModel):
         "min-max tour over every usable region (tours.py) instead of the revenue's best")
     space_tour_stop_s: float = Field(default=2.0, ge=0, description="seconds a tour counts "
                                      "at each region (stopping, turning to the next)")
+    space_tour_sum_weight: float = Field(
+        default=1.0, ge=0, description="a tour insertion costs what it adds to the longest "
+        "route plus this times what it adds per route (0: pure min-max)")
     space_tour_coarse: int = Field(default=4, ge=1, description="region-to-region times on "
                                    "the grid coarsened by this factor")
     nav_v_mps: float = Field(default=0.5, gt=0, description="the agents' max_v_mps (the "

@@ -254,7 +254,7 @@ class GoalBook:
             start[len(need):][~np.isfinite(offset[len(need):])] = np.inf
             offset[~np.isfinite(offset)] = 0.0
             routes = min_max_routes(start, offset, d[:F, :F] / cfg.nav_v_mps,
-                                    cfg.space_tour_stop_s)
+                                    cfg.space_tour_stop_s, cfg.space_tour_sum_weight)
             out = {need[n]: int(cols[routes[n][0]]) for n in range(len(need)) if routes[n]}
         rest = scores.copy()
         rest[list(out), :] = -np.inf

@@ -5,9 +5,10 @@ second, one robot and one region at a time. Three robots that start in one room 
 region of that room best and clean it up together while the doors wait (AWS house, seed 0:
 all three in the dining room for the first 70 s). A tour looks past the next goal: every
 usable region goes into one open route per robot, the routes built so that the last of them
-ends as early as possible (min-max, since the mission ends with the last robot), by farthest
-insertion; a robot that needs a goal takes the first stop of its route. A robot keeping its
-goal starts its route at that goal, after the time it takes to get there.
+ends as early as possible (min-max, since the mission ends with the last robot) without
+detours on the others, by farthest insertion and 2-opt; a robot that needs a goal takes the
+first stop of its route. A robot keeping its goal starts its route at that goal, after the
+time it takes to get there.
 
 Travel times between regions come from one Dijkstra per region on a coarse copy of the
 traversable grid (a coarse cell is traversable where any of its cells is); the time from a
@@ -74,14 +75,16 @@ def _insertion(route: list[int], start_s: np.ndarray, leg_s: np.ndarray
 
 
 def min_max_routes(start_s: np.ndarray, offset_s: np.ndarray, leg_s: np.ndarray,
-                   stop_s: float) -> list[list[int]]:
+                   stop_s: float, sum_weight: float = 0.0) -> list[list[int]]:
     """One open route per robot over the regions, so that the longest ends early.
 
     start_s: (R, F) seconds from robot r (or the goal it keeps) to region f, inf if it cannot;
     offset_s: (R,) seconds before robot r's route starts (the way to a kept goal);
     leg_s: (F, F) seconds from region i to region j; stop_s: seconds spent at each region.
-    Farthest insertion: the region whose best insertion ends latest goes first, into the route
-    where it ends earliest. Regions no robot can get to are left out.
+    Each insertion costs what it adds to the longest route plus `sum_weight` times the mean
+    it adds per route (with 0, routes off the critical one may detour freely: crossing trips).
+    Farthest insertion: the region whose best insertion costs most goes first, into the route
+    where it costs least. Regions no robot can get to are left out.
     """
     start_s = np.asarray(start_s, np.float64)
     R, F = start_s.shape
@@ -90,23 +93,48 @@ def min_max_routes(start_s: np.ndarray, offset_s: np.ndarray, leg_s: np.ndarray,
     length = np.asarray(offset_s, np.float64).reshape(R).copy()
     todo = np.ones(F, bool)
     while todo.any():
-        best_end = np.full(F, np.inf)
+        makespan = float(length.max())
+        best_cost = np.full(F, np.inf)
         best_robot = np.zeros(F, np.int64)
         best_at = np.zeros(F, np.int64)
+        best_end = np.zeros(F)
         for r in range(R):
             added, at = _insertion(routes[r], start_s[r], leg_s)
             end = length[r] + added + stop_s
-            better = end < best_end
-            best_end[better], best_robot[better], best_at[better] = end[better], r, at[better]
-        candidates = todo & np.isfinite(best_end)
+            with np.errstate(invalid="ignore"):
+                cost = np.maximum(end - makespan, 0.0) + sum_weight * (added + stop_s) / R
+            better = cost < best_cost
+            best_cost[better], best_robot[better] = cost[better], r
+            best_at[better], best_end[better] = at[better], end[better]
+        candidates = todo & np.isfinite(best_cost)
         if not candidates.any():
             break
-        f = int(np.flatnonzero(candidates)[np.argmax(best_end[candidates])])
+        f = int(np.flatnonzero(candidates)[np.argmax(best_cost[candidates])])
         r = int(best_robot[f])
         routes[r].insert(int(best_at[f]), f)
         length[r] = best_end[f]
         todo[f] = False
-    return routes
+    return [two_opt(route, start_s[r], leg_s) for r, route in enumerate(routes)]
+
+
+def two_opt(route: list[int], start_s: np.ndarray, leg_s: np.ndarray) -> list[int]:
+    """The route with segments reversed while that shortens it (its start fixed, its end
+    free)."""
+    def cost(rt: list[int]) -> float:
+        return float(start_s[rt[0]] + sum(leg_s[a, b] for a, b in zip(rt[:-1], rt[1:],
+                                                                      strict=True)))
+
+    best, best_cost = list(route), cost(route) if route else 0.0
+    improved = len(route) > 1
+    while improved:
+        improved = False
+        for i in range(len(best) - 1):
+            for j in range(i + 1, len(best)):
+                trial = best[:i] + best[i:j + 1][::-1] + best[j + 1:]
+                c = cost(trial)
+                if c < best_cost - 1e-9:
+                    best, best_cost, improved = trial, c, True
+    return best
 
 
 def route_length_s(route: list[int], start_s: np.ndarray, offset_s: float, leg_s: np.ndarray,
