@@ -91,6 +91,17 @@ def test_space_steers_a_robot_away_from_a_teammate_goal() -> None:
     assert unreachable[0, 0] == -np.inf
 
 
+def test_a_wider_teammate_radius_keeps_a_robot_out_of_a_teammates_room() -> None:
+    # the near region is 3 m from a teammate's goal: outside the view radius, inside 4 m
+    fs = regions([(2.0, 0.0), (0.0, 2.6)], [1.0, 1.0])
+    path = np.array([[2.0, 2.6]])
+    robot = RobotStates(np.zeros((1, 2)), np.array([math.pi / 4]), np.array([[5.0, 0.0]]))
+    narrow = make_scorer("space", EdgeConfig(space_view_radius_m=1.0))
+    assert int(np.argmax(narrow.score(path, fs, robot)[0])) == 0
+    wide = make_scorer("space", EdgeConfig(space_view_radius_m=1.0, space_teammate_radius_m=4.0))
+    assert int(np.argmax(wide.score(path, fs, robot)[0])) == 1
+
+
 def test_mission_config_gives_the_edge_the_agents_speeds() -> None:
     c = SpacemapConfig.model_validate({"agent": {"max_v_mps": 0.3, "max_omega_radps": 0.5}})
     assert (c.edge.nav_v_mps, c.edge.nav_omega_radps) == (0.3, 0.5)

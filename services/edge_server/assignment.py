@@ -103,7 +103,8 @@ class SpaceScorer:
             path_m, frontiers, robots, v_mps=c.nav_v_mps, omega_radps=c.nav_omega_radps,
             view_radius_m=c.space_view_radius_m, teammate_discount=c.space_teammate_discount,
             min_time_s=c.revenue_min_path_m / c.nav_v_mps, grid_gain_per_m=c.space_grid_gain_per_m,
-            grid_view_m=c.space_grid_view_m)
+            grid_view_m=c.space_grid_view_m,
+            teammate_radius_m=c.space_teammate_radius_m or c.space_view_radius_m)
 
     def match(self, scores: np.ndarray) -> dict[int, int]:
         return joint_match(scores) if self.config.space_joint else greedy_match(scores)

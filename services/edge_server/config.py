@@ -59,6 +59,9 @@ class EdgeConfig(BaseModel):
         default=1.5, ge=0, description="regions this close to f′ are seen from it; a teammate's "
         "goal this close discounts them")
     space_teammate_discount: float = Field(default=0.25, ge=0, le=1)
+    space_teammate_radius_m: float = Field(
+        default=0.0, ge=0, description="regions this close to a teammate's goal are discounted "
+        "(0: space_view_radius_m)")
     space_joint: bool = Field(default=True, description="assignment problem instead of greedy")
     space_grid_gain_per_m: float = Field(
         default=0.0, ge=0, description="`space`: a goal is also worth this per metre of 2D "
