@@ -1,4 +1,4 @@
-"""Min-max tours over the frontier regions (`edge.space_tour`, tours.py)."""
+"""Min-max tours over the frontier regions (`edge.space_tour`, tours.py), and goal keeping."""
 
 from __future__ import annotations
 
@@ -98,3 +98,22 @@ def test_two_opt_undoes_a_crossing() -> None:
     leg = np.abs(xs[:, None] - xs[None, :])
     assert two_opt([0, 2, 1, 3], xs, leg) == [0, 1, 2, 3]
     assert two_opt([3, 2, 1, 0], xs, leg) == [0, 1, 2, 3]  # the end is free: start near
+
+
+def test_a_robot_whose_goal_cell_was_taken_keeps_its_region_at_the_new_goal() -> None:
+    # robot 0 heads for the region at column 40; its old goal cell (column 42) is now blocked
+    # and the region's f′ is column 40. A nearer region (column 10) would win a new assignment.
+    config = EdgeConfig(space_view_radius_m=0.05, keep_radius_m=0.3)
+    trav, fs, spec = corridor([40, 10])
+    trav[:, 42] = False
+    old = (42.5 * CELL, 0.25)
+    for retarget, expected in ((False, 1), (True, 0)):
+        book = GoalBook(config.model_copy(update={"retarget_goals": retarget}))
+        book.active[0] = ActiveGoal(7, old, (40.5 * CELL, 0.25), 1.0)
+        book.next_goal_id = 8
+        fields = RobotFields(trav, {0: np.array([2, 30])}, 3.0)
+        result = book.plan(1, [0], fields, fs, spec, make_scorer("space", config),
+                           np.array([[3.05, 0.25, np.pi]]))
+        assert result.assigned == {0: expected}
+        assert [g.goal_id for g in result.new_goals] == [8]  # a new goal either way
+        assert np.isclose(result.new_goals[0].x, fs.goal_xy[expected, 0])

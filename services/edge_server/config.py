@@ -154,6 +154,11 @@ class EdgeConfig(BaseModel):
     keep_radius_m: float = Field(
         default=0.5, ge=0, description="hysteresis: a goal is kept while a frontier lies this close"
     )
+    retarget_goals: bool = Field(
+        default=False, description="a kept region whose goal cell the robot can no longer reach "
+        "(an obstacle seen next to it) but whose new f′ it can: the robot keeps the region and "
+        "gets the new f′, instead of a new assignment (a third of the goals dropped in an "
+        "AWS-house replay)")
     blacklist_radius_m: float = Field(default=0.5, ge=0)
     blacklist_ticks: int = Field(
         default=300, ge=0, description="how long invalid/unreachable goals are set aside, ticks"

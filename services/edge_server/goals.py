@@ -2,7 +2,9 @@
 
 A robot keeps its goal while a frontier cell lies within `keep_radius_m` of the goal's frontier
 anchor (frontier ids are renumbered every plan, so goals are matched by place), the robot can
-still reach it and no other robot kept that frontier first. Goals reported invalid or
+still reach it and no other robot kept that frontier first; with `retarget_goals`, a robot whose
+goal cell it can no longer reach but whose region's new f′ it can keeps the region and gets
+that f′. Goals reported invalid or
 unreachable set their place aside for `blacklist_ticks`; reached goals for
 `reached_blacklist_ticks` (a frontier the robot stood at but could not clear is not worth an
 immediate second trip); a reached F_w spot for `weak_visited_ticks` (it has been looked at
@@ -65,6 +67,7 @@ class GoalBook:
         self.looked_from: list[tuple[float, float]] = []  # reached places (space_second_look_m)
         self.successors: dict[int, ActiveGoal] = {}  # robot → queued goal last sent
         self.provisional: set[int] = set()  # robots on an adopted successor, not yet re-scored
+        self.retarget: set[int] = set()  # robots whose kept region's f′ moved (retarget_goals)
         self.next_goal_id = 0
 
     # -- agent reports ---------------------------------------------------------------------
@@ -161,8 +164,13 @@ class GoalBook:
             if dist[r - r0, c - c0] * spec.resolution_m > self.config.keep_radius_m:
                 continue
             f = int(window[nearest[0][r - r0, c - c0], nearest[1][r - r0, c - c0]]) - 1
-            if usable[f] and f not in kept.values() and fields.reaches(robot, grc)[0]:
+            if not usable[f] or f in kept.values():
+                continue
+            if fields.reaches(robot, grc)[0]:
                 kept[robot] = f
+            elif self.config.retarget_goals and fields.reaches(robot, frontiers.goal_rc[f])[0]:
+                kept[robot] = f  # its cell was taken (an obstacle seen next to it): f′ moved
+                self.retarget.add(robot)
         return kept
 
     def plan(
@@ -173,6 +181,7 @@ class GoalBook:
         `poses`: (R, 3) x, y, yaw (world) of `robots`, in that order."""
         goal_rc = frontiers.goal_rc
         usable = self.allowed(frontiers, tick) & fields.reachable[goal_rc[:, 0], goal_rc[:, 1]]
+        self.retarget.clear()
         kept = self._kept(robots, fields, frontiers, spec, usable)
         for robot in self.provisional:  # a successor was chosen ahead: score it with the rest
             kept.pop(robot, None)
@@ -207,6 +216,10 @@ class GoalBook:
             goal, self.active[robots[i]] = self._goal(robots[i], f, tick, frontiers,
                                                       float(scores[i, f]))
             self.successors.pop(robots[i], None)  # a new goal clears the agent's queued one
+            new_goals.append(goal)
+        for robot in sorted(self.retarget & set(kept) - self.provisional):  # same region, new f′
+            old = self.active[robot]
+            goal, self.active[robot] = self._goal(robot, kept[robot], tick, frontiers, old.revenue)
             new_goals.append(goal)
         for robot, old in dropped.items():  # frontier gone and nothing else: withdraw the goal
             if robot not in assigned and robot in robots:
