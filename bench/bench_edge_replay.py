@@ -11,6 +11,8 @@ the results alone. Every agent is taken as alive throughout (true for a normal m
         --robots 3 --sim-time 300 --seed 0 --sample-every 0
     .venv/bin/python bench/bench_edge_replay.py /tmp/agent_rec --check
     .venv/bin/python bench/bench_edge_replay.py /tmp/agent_rec --profile
+
+It also prints why goals were not kept from one plan to the next (`GoalBook.drops`).
 """
 
 from __future__ import annotations
@@ -68,9 +70,11 @@ def instrument(planner: EdgePlanner, timer: StageTimer) -> None:
         setattr(planner_mod, name, timer.wrap(stage, getattr(planner_mod, name)))
 
 
-def replay(rec: Path, limit: int | None) -> tuple[StageTimer, list[float], dict, int]:
-    """(timer, CPU s per plan, mismatches per output, plans) of the whole recording."""
-    config = load_config(rec / "run" / "config.yaml", {})
+def replay(rec: Path, limit: int | None, overrides: dict[str, str] | None = None,
+           ) -> tuple[StageTimer, list[float], dict, EdgePlanner]:
+    """(timer, CPU s per plan, mismatches per output, the planner) of the whole recording;
+    `overrides` (dotted keys) change the mission's config (then --check fails by design)."""
+    config = load_config(rec / "run" / "config.yaml", overrides or {})
     keys = Keys(config.bus.prefix)
     planner = EdgePlanner(config.edge, config.sim.tick_s)
     for robot in range(config.sim.robots):
@@ -105,7 +109,7 @@ def replay(rec: Path, limit: int | None) -> tuple[StageTimer, list[float], dict,
             break
     partial = limit is not None
     mismatches = {t: _mismatch(expected[t], produced[t], partial) for t in expected}
-    return timer, plan_s, mismatches, len(plan_s)
+    return timer, plan_s, mismatches, planner
 
 
 def _feed(planner: EdgePlanner, msg: Message) -> None:
@@ -147,16 +151,21 @@ def main() -> None:
                         help="compare goals and grids with the mission's, byte for byte")
     parser.add_argument("--profile", action="store_true", help="cProfile the replay")
     parser.add_argument("--limit", type=int, default=None, help="stop after this many plans")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="change the mission's config (e.g. edge.retarget_goals=true)")
     args = parser.parse_args()
     prof = cProfile.Profile() if args.profile else None
     if prof is not None:
         prof.enable()
-    timer, plan_s, mismatches, _ = replay(args.recording, args.limit)
+    timer, plan_s, mismatches, planner = replay(args.recording, args.limit,
+                                                dict(s.split("=", 1) for s in args.set))
     if prof is not None:
         prof.disable()
         pstats.Stats(prof).sort_stats("cumulative").print_stats(30)
         pstats.Stats(prof).sort_stats("tottime").print_stats(25)
     report(timer, plan_s)
+    print("\ngoals not kept: " + (", ".join(f"{why} {n}" for why, n in
+                                            planner.book.drops.most_common()) or "none"))
     if args.check:
         print("\noutputs against the mission: " + ", ".join(
             f"{t} {v}" for t, v in mismatches.items()))

@@ -19,6 +19,7 @@ frontier vanished and that gets no other goal receives a cancel for its old goal
 from __future__ import annotations
 
 import logging
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,6 +69,7 @@ class GoalBook:
         self.successors: dict[int, ActiveGoal] = {}  # robot → queued goal last sent
         self.provisional: set[int] = set()  # robots on an adopted successor, not yet re-scored
         self.retarget: set[int] = set()  # robots whose kept region's f′ moved (retarget_goals)
+        self.drops: Counter[str] = Counter()  # why goals were not kept, over the mission
         self.next_goal_id = 0
 
     # -- agent reports ---------------------------------------------------------------------
@@ -153,24 +155,33 @@ class GoalBook:
             rc = spec.cell_of(np.array([goal.anchor_xy]))
             grc = spec.cell_of(np.array([goal.goal_xy]))
             if not (spec.contains(rc)[0] and spec.contains(grc)[0]):
+                self.drops["off the grid"] += 1
                 continue
             r, c = rc[0]
             # nearest frontier cell to the old anchor: EDT on a window of the keep radius
             r0, c0 = max(r - k, 0), max(c - k, 0)
             window = frontiers.labels[r0 : r + k + 1, c0 : c + k + 1]
             if not window.any():
+                self.drops["region gone"] += 1
                 continue
             dist, nearest = ndimage.distance_transform_edt(window == 0, return_indices=True)
             if dist[r - r0, c - c0] * spec.resolution_m > self.config.keep_radius_m:
+                self.drops["region gone"] += 1
                 continue
             f = int(window[nearest[0][r - r0, c - c0], nearest[1][r - r0, c - c0]]) - 1
             if not usable[f] or f in kept.values():
+                self.drops["region not usable" if not usable[f] else "a teammate kept it"] += 1
                 continue
             if fields.reaches(robot, grc)[0]:
                 kept[robot] = f
-            elif self.config.retarget_goals and fields.reaches(robot, frontiers.goal_rc[f])[0]:
+            elif not fields.reaches(robot, frontiers.goal_rc[f])[0]:
+                self.drops["region out of reach"] += 1
+            elif self.config.retarget_goals:
                 kept[robot] = f  # its cell was taken (an obstacle seen next to it): f′ moved
                 self.retarget.add(robot)
+                self.drops["goal cell taken, region kept at its new f′"] += 1
+            else:
+                self.drops["goal cell taken"] += 1
         return kept
 
     def plan(
