@@ -186,8 +186,9 @@ def main(config: SpacemapConfig) -> None:
                 node.handle(item)
             if node.planner.judge.complete and not complete_logged:
                 complete_logged = True
-                log.info("exploration complete at tick %s (all plans: median %.1f ms)",
-                         node.planner.judge.complete_tick, statistics.median(node.all_plan_ms))
+                log.info("exploration complete at tick %s (all plans: median %.1f ms; goals "
+                         "not kept: %s)", node.planner.judge.complete_tick,
+                         statistics.median(node.all_plan_ms), dict(node.planner.book.drops))
     log.info("edge stopped (submap seq gaps: %s; %d map/cloud queries held the lock %.2f s)",
              dict(node.planner.store.seq_gaps), node.cloud_queries, node.cloud_lock_s)
 
