@@ -13,6 +13,7 @@ from services.evaluator.explain import (
     markdown,
     revisits,
     state_times,
+    turned_away,
 )
 from services.launcher.report import ordered_events
 
@@ -119,6 +120,20 @@ def test_revisits_count_reached_goals_at_a_place_reached_before() -> None:
     assert revisits(events) == (2, 4)
     assert revisits(events, radius_m=0.1) == (0, 4)
     assert revisits([]) == (0, 0)
+
+
+def test_turned_away_counts_replaced_goals_whose_place_came_back() -> None:
+    def goal(tick: int, robot: int, goal_id: int, x: float) -> dict:
+        return {**_goal(tick, goal_id), "robot": robot, "x": x, "y": 0.0}
+
+    events = [goal(10, 0, 0, 1.0),
+              goal(20, 0, 1, 5.0),  # replaced, 4 m away: ...
+              goal(30, 1, 2, 1.3),  # ... and its place given again: churn
+              goal(40, 0, 3, 5.5),  # replaced by one 0.5 m away: not counted
+              goal(50, 0, 4, 9.0)]  # replaced, 3.5 m away, never given again
+    assert turned_away(events) == (1, 2)
+    assert turned_away(events, min_m=5.0) == (0, 0)
+    assert turned_away([]) == (0, 0)
 
 
 def test_stalled_counts_following_without_moving() -> None:

@@ -115,7 +115,7 @@ def redraw_plots(run_dir: Path, metrics: dict[str, Any]) -> None:
 
 def explain_run_folder(run_dir: Path) -> str:
     """`spacemap eval --explain`: where each robot's time and distance went (markdown)."""
-    from services.evaluator.explain import explain_events, markdown, revisits
+    from services.evaluator.explain import explain_events, markdown, revisits, turned_away
 
     path = run_dir / rf.EVENTS
     if not path.exists():
@@ -127,6 +127,9 @@ def explain_run_folder(run_dir: Path) -> str:
     events = rf.read_events(path)
     per_robot = explain_events(events, tracks, end_tick, config.sim.tick_s)
     again, reached = revisits(events)
-    return markdown(per_robot) + (f"\nReached goals at a place (0.5 m) reached before: {again} "
-                                  f"of {reached}\n")
+    given, away = turned_away(events)
+    return markdown(per_robot) + (
+        f"\nReached goals at a place (0.5 m) reached before: {again} of {reached}\n"
+        f"Goals replaced by one 1 m or more away: {away}, of which {given} had their place "
+        "(0.75 m) given out again later (a robot turned away from a region nobody had seen)\n")
 

@@ -191,6 +191,30 @@ def revisits(events: Sequence[dict[str, Any]], radius_m: float = 0.5) -> tuple[i
     return again, len(xy)
 
 
+def turned_away(events: Sequence[dict[str, Any]], min_m: float = 1.0, radius_m: float = 0.75
+                ) -> tuple[int, int]:
+    """(replaced goals whose place a goal of any robot got again later, goals replaced by one
+    at least `min_m` away): robots turned from a region nobody had seen yet (churn)."""
+    goals = sorted((int(e["tick"]), int(e["robot"]), int(e["goal_id"]), float(e["x"]),
+                     float(e["y"])) for e in events
+                    if e["kind"] == "goal" and not e.get("cancel") and not e.get("queued"))
+    where = {(r, g): (x, y) for _, r, g, x, y in goals}
+    end = max((int(e["tick"]) for e in events), default=0)
+    away = again = 0
+    for robot in sorted({r for _, r, _, _, _ in goals}):
+        spans = goal_spans(sorted((e for e in events if e.get("robot") == robot),
+                                  key=lambda e: int(e["tick"])), end)
+        for old, new in zip(spans[:-1], spans[1:], strict=True):
+            a, b = where.get((robot, old.goal_id)), where.get((robot, new.goal_id))
+            if old.outcome != "replaced" or a is None or b is None or np.hypot(
+                    b[0] - a[0], b[1] - a[1]) < min_m:
+                continue
+            away += 1
+            again += any(t > old.end_tick and np.hypot(x - a[0], y - a[1]) < radius_m
+                         for t, _, _, x, y in goals)
+    return again, away
+
+
 def explain_events(events: Sequence[dict[str, Any]],
                    tracks: Sequence[tuple[np.ndarray, np.ndarray]], end_tick: int,
                    tick_s: float) -> dict[int, RobotExplain]:
