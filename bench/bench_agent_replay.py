@@ -82,6 +82,7 @@ def record(out: Path, run_args: list[str]) -> None:
 
             bus.tap(f"{bus.keys.prefix}/robot/**", write)
             bus.tap(bus.keys.map_grid(), write)
+            bus.tap(bus.keys.map_frontiers(), write)  # for studies of the plans' regions
             subprocess.run([*py, "run", "--connect", endpoint, "--out", str(out / "run"),
                             *run_args], cwd=REPO, check=True)
             time.sleep(1.0)

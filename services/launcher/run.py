@@ -164,6 +164,7 @@ def _record(
 
 
 PROFILE = "profile.json"
+REAP_EVERY_S = 0.5  # how often the launcher looks for services that exited
 
 
 def _cpu_seconds(group: ProcessGroup | None) -> dict[str, float]:
@@ -198,7 +199,7 @@ def _watch(
     start = last_change = time.monotonic()
     last_tick = -1
     console = console or Console(stderr=True)
-    next_log = start
+    next_log = next_reap = start
 
     def panel() -> object:
         row = sampler.rows[-1] if sampler.rows else None
@@ -208,13 +209,13 @@ def _watch(
               auto_refresh=False) if console.is_terminal else _NoLive() as live:
         while True:
             monitor.pump(timeout=0.2)
-            dead = {} if group is None else {
-                n: c for n, c in group.dead().items() if n != "router" or c != 0
-            }
-            if dead:
-                raise MissionError(f"service(s) exited: {dead}; see {group.log_dir}")
-            tick = monitor.clock.tick if monitor.clock else -1
             now = time.monotonic()
+            if group is not None and now >= next_reap:  # pump returns per burst: not each
+                next_reap = now + REAP_EVERY_S
+                dead = {n: c for n, c in group.dead().items() if n != "router" or c != 0}
+                if dead:
+                    raise MissionError(f"service(s) exited: {dead}; see {group.log_dir}")
+            tick = monitor.clock.tick if monitor.clock else -1
             if tick != last_tick:
                 last_tick, last_change = tick, now
             elif now - last_change > stall_timeout_s:
