@@ -72,7 +72,7 @@ def test_random_add_remove_move_sequences_match_map_quality(seed: int, ev: EvalC
                              return_index=True)
         merged = merged[np.sort(first)]
         assert_same(scorer(merged, maps), map_quality(probe, merged, maps))
-    assert 0 < scorer.merged.n_ghost < len(scorer.merged.keys)  # the test saw both kinds
+    assert 0 < scorer.merged.n_ghost < scorer.merged.n_voxels  # the test saw both kinds
 
 
 def test_emptied_map_and_no_robot_maps() -> None:
@@ -114,14 +114,40 @@ def test_a_point_moved_inside_its_voxel_is_scored_again() -> None:
         assert_same(scorer(moved, [moved]), map_quality(probe, moved, [moved]))
 
 
-def test_two_points_in_one_voxel_fall_back_to_map_quality() -> None:
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("ev", CONFIGS, ids=["default", "short-ghost-dist"])
+def test_several_points_in_a_voxel_match_map_quality(seed: int, ev: EvalConfig) -> None:
+    """Maps of voxel means, as the edge sends: several points to a voxel of `voxel_m`, a
+    voxel a ghost only when all of them are, points that come, go and move in their voxel."""
+    rng = np.random.default_rng(10 + seed)
+    probe = box_probe(seed, ev)
+
+    def means(n: int) -> np.ndarray:
+        centres = lattice(rng, n)
+        jitter = rng.uniform(-0.024, 0.024, (3 * n, 3))  # three to a voxel, some in others'
+        return (np.repeat(centres, 3, axis=0) + jitter).astype(np.float32).astype(np.float64)
+
+    maps = [means(150) for _ in range(3)]
+    scorer = LiveQuality(probe)
+    for _ in range(10):
+        maps = [np.concatenate([p[rng.random(len(p)) > 0.15], means(40)]) for p in maps]
+        merged = np.concatenate(maps)
+        assert_same(scorer(merged, maps), map_quality(probe, merged, maps))
+        moved = rng.random(len(maps[0])) < 0.2
+        maps[0][moved] += rng.uniform(-0.02, 0.02, (int(moved.sum()), 3))
+    keys = voxels.pack(voxels.voxel_indices(merged, VOXEL_M))
+    assert np.unique(keys).size < 0.6 * len(keys)  # the maps did share voxels
+    assert 0 < scorer.merged.n_ghost < scorer.merged.n_voxels
+
+
+def test_a_point_held_twice_falls_back_to_map_quality() -> None:
     probe = box_probe()
     rng = np.random.default_rng(3)
     pts = lattice(rng, 100)
-    twin = np.concatenate([pts, pts[:5] + 0.01])  # a second point inside 5 voxels
+    twin = np.concatenate([pts, pts[:5]])
     scorer = LiveQuality(probe)
     tally = MapTally(scorer.truth, VOXEL_M, None)
-    assert not tally.update(twin) and tally.keys.size == 0
+    assert not tally.update(twin) and tally.ids.size == 0
     assert_same(scorer(twin, [twin, pts]), map_quality(probe, twin, [twin, pts]))
     assert_same(scorer(pts, [pts, pts]), map_quality(probe, pts, [pts, pts]))
 

@@ -13,12 +13,14 @@ The figures equal `scoring.map_quality`'s on the same points exactly, not approx
   counting points left around it. (A count of covering points per truth point would make
   removals a subtraction, but listing every (point, truth) pair within the radius cost more
   than scoring from scratch: ~30 pairs a point.)
-- a ghost is a per-voxel verdict, which equals the per-point one (`Probe.surface_distance`
-  of that point alone) when every voxel of `voxel_m` holds one point: the edge's maps are
-  voxel centres at that size. A map with two points in a voxel is refused
-  (`MapTally.update` returns False; the caller scores from scratch).
-A point is known by its voxel key and its coordinates: one that moved inside its voxel is a
-removal plus an addition.
+- a ghost is a per-voxel verdict (`Probe.ghost_point_mask`): a voxel of `voxel_m` is a ghost
+  when none of its points lies within `ghost_dist_m` of a surface. Each point's own test is
+  made once, when it appears; the voxels' verdicts are redrawn each sample from those (the
+  edge's maps are voxel means, several to a voxel at this size), and a point whose voxel
+  turned ghost or stopped being one is taken back or scored like one that went or came.
+A point is known by its exact coordinates (`point_ids`): one that moved is a removal plus an
+addition. A map holding one point twice is refused (`MapTally.update` returns False; the
+caller scores from scratch).
 """
 
 from __future__ import annotations
@@ -77,12 +79,27 @@ class TruthIndex:
         return self.order[idx]
 
 
+def _mix(x: np.ndarray) -> np.ndarray:
+    """splitmix64's finaliser: every input bit moves every output bit (float32 values read
+    as float64 have 29 zero low bits, which a plain product would keep)."""
+    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return x ^ (x >> np.uint64(31))
+
+
+def point_ids(pts: np.ndarray) -> np.ndarray:
+    """(N,) uint64 id of each point's exact coordinates (a hash: equal points, equal ids;
+    `MapTally.diff` checks the coordinates of every match)."""
+    bits = np.ascontiguousarray(pts, dtype=np.float64).view(np.uint64).reshape(-1, 3)
+    return _mix(_mix(_mix(bits[:, 0]) ^ bits[:, 1]) ^ bits[:, 2])
+
+
 @dataclass(frozen=True)
 class _Change:
-    """A map's next points (sorted by key) against the tally's: which are new, which old
+    """A map's next points (sorted by id) against the tally's: which are new, which old
     ones are gone."""
 
-    keys: np.ndarray
+    ids: np.ndarray
     pts: np.ndarray
     same: np.ndarray  # per new point: held before at the same coordinates
     pos: np.ndarray  # per new point: its index before, where `same`
@@ -90,58 +107,73 @@ class _Change:
 
 
 class MapTally:
-    """One map's points (sorted by voxel key) and the truth points its counting points cover
-    (`metrics.covered_mask`). With a ghost test, ghost points are kept but do not count."""
+    """One map's points (sorted by id) and the truth points its counting points cover
+    (`metrics.covered_mask`). With a ghost test, a voxel all of whose points fail it is a
+    ghost: its points are kept but do not count (`Probe.ghost_point_mask`)."""
 
     def __init__(self, truth: TruthIndex, voxel_m: float, ghost: GhostTest | None) -> None:
         self.truth, self.voxel_m, self.ghost = truth, voxel_m, ghost
-        self.keys = np.zeros(0, np.int64)
+        self.ids = np.zeros(0, np.uint64)
         self.points = np.zeros((0, 3))
+        self.near = np.zeros(0, bool)  # per point: passes the ghost test on its own
         self.counting = np.zeros(0, bool)
         self.covered = np.zeros(len(truth), bool)
-
-    @property
-    def n_ghost(self) -> int:
-        return int(self.counting.size - np.count_nonzero(self.counting))
+        self.n_voxels = 0
+        self.n_ghost = 0
 
     def update(self, points: np.ndarray) -> bool:
-        """Make the tally that of `points`; False (tally unchanged) when a voxel holds two."""
+        """Make the tally that of `points`; False (tally unchanged) when two are equal."""
         change = self.diff(points)
         if change is None:
             return False
-        gone = self.points[change.gone & self.counting]
-        new = change.pts[~change.same]
-        counting_new = self.counting_of(new)
-        counting = np.empty(change.keys.size, bool)
-        counting[change.same] = self.counting[change.pos[change.same]]
-        counting[~change.same] = counting_new
-        self.keys, self.points, self.counting = change.keys, change.pts, counting
-        self._cover(new[counting_new])
-        self._uncover(gone)
+        same, pos = change.same, change.pos
+        near = np.empty(change.ids.size, bool)
+        near[same] = self.near[pos[same]]
+        near[~same] = self.near_of(change.pts[~same])
+        counting = self._counting(change.pts, near)
+        was = np.zeros(change.ids.size, bool)
+        was[same] = self.counting[pos[same]]
+        kept = np.zeros(self.ids.size, bool)  # old points still held and still counting
+        kept[pos[same & counting]] = True
+        lost = self.points[self.counting & ~kept]  # went, or their voxel became a ghost
+        gained = change.pts[counting & ~was]
+        self.ids, self.points, self.near, self.counting = change.ids, change.pts, near, counting
+        self._cover(gained)
+        self._uncover(lost)
         return True
 
     def diff(self, points: np.ndarray) -> _Change | None:
-        """How `points` differ from the tally's; None when a voxel holds two of them."""
+        """How `points` differ from the tally's; None when two of them are equal."""
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        keys = voxels.pack(voxels.voxel_indices(pts, self.voxel_m))
-        if keys.size > 1 and not np.all(keys[1:] > keys[:-1]):  # the edge sends them sorted
-            order = np.argsort(keys, kind="stable")
-            keys, pts = keys[order], pts[order]
-            if np.any(keys[1:] == keys[:-1]):
-                return None
-        pos = np.searchsorted(self.keys, keys)
-        same = pos < self.keys.size
-        same[same] = self.keys[pos[same]] == keys[same]
+        ids = point_ids(pts)
+        order = np.argsort(ids, kind="stable")
+        ids, pts = ids[order], pts[order]
+        if np.any(ids[1:] == ids[:-1]):
+            return None
+        pos = np.searchsorted(self.ids, ids)
+        same = pos < self.ids.size
+        same[same] = self.ids[pos[same]] == ids[same]
         same[same] = np.all(self.points[pos[same]] == pts[same], axis=1)
-        gone = np.ones(self.keys.size, bool)
+        gone = np.ones(self.ids.size, bool)
         gone[pos[same]] = False
-        return _Change(keys, pts, same, pos, gone)
+        return _Change(ids, pts, same, pos, gone)
 
-    def counting_of(self, new_pts: np.ndarray) -> np.ndarray:
-        """Which new points count (all, or the non-ghosts)."""
+    def near_of(self, new_pts: np.ndarray) -> np.ndarray:
+        """Which new points pass the ghost test on their own (all, without one)."""
         if self.ghost is None:
             return np.ones(len(new_pts), bool)
         return ~self.ghost(new_pts)
+
+    def _counting(self, pts: np.ndarray, near: np.ndarray) -> np.ndarray:
+        """Per point: its voxel holds a point that passes the ghost test; the voxel counts."""
+        if self.ghost is None:  # every point counts; the voxels are not asked for
+            return np.ones(len(pts), bool)
+        keys = voxels.pack(voxels.voxel_indices(pts, self.voxel_m))
+        uniq, inverse = np.unique(keys, return_inverse=True)
+        cleared = np.zeros(uniq.size, bool)
+        cleared[inverse[near]] = True
+        self.n_voxels, self.n_ghost = int(uniq.size), int(uniq.size - np.count_nonzero(cleared))
+        return cleared[inverse]
 
     def _cover(self, new: np.ndarray) -> None:
         """Truth the new counting points cover (only uncovered truth around them is asked)."""
@@ -182,8 +214,8 @@ class LiveQuality:
     def __call__(
         self, points_world: np.ndarray, robot_points: Sequence[np.ndarray] | None
     ) -> dict[str, float | None]:
-        """The figures of these maps; from scratch (`map_quality`) where a map has two points
-        in one voxel."""
+        """The figures of these maps; from scratch (`map_quality`) where a map holds one
+        point twice."""
         robot_points = list(robot_points or [])
         if len(self.robots) != len(robot_points):
             self.robots = [MapTally(self.truth, self.probe.ev.voxel_m, None)
@@ -197,7 +229,7 @@ class LiveQuality:
     def figures(self, with_overlap: bool) -> dict[str, float | None]:
         """The tallies' figures, with `map_quality`'s formulas."""
         total = len(self.truth)
-        n_ghost, n_occupied = self.merged.n_ghost, self.merged.keys.size
+        n_ghost, n_occupied = self.merged.n_ghost, self.merged.n_voxels
         covered = np.count_nonzero(self.merged.covered)
         return {
             "coverage_3d_pct": float(100.0 * covered / total) if total else 0.0,
