@@ -9,7 +9,7 @@ import numpy as np
 from schemas.messages import GoalStatus
 from services.common.grid import GridSpec
 from services.common.planning import distance_fields
-from services.edge_server.completion import VisitLog
+from services.edge_server.completion import CompletionJudge, VisitLog
 from services.edge_server.config import EdgeConfig
 from services.edge_server.frontiers import frontier_set
 from services.edge_server.goals import GoalBook
@@ -26,6 +26,22 @@ def test_visit_log_needs_range_and_field_of_view() -> None:
     assert len(log.views) == 1
     log.record(0, 0.0, 0.0, math.pi / 2)  # turned to +y
     assert log.seen(pts).tolist() == [True, True, False, False]
+
+
+def test_the_tail_completes_when_its_regions_are_a_small_enough_fraction_of_the_map() -> None:
+    def verdicts(config: EdgeConfig, fractions: list[float | None]) -> list[bool]:
+        judge = CompletionJudge(config, tick_s=0.1)
+        return [judge.update(100 + 10 * k, 5, 10_000, f) for k, f in enumerate(fractions)]
+
+    tail = [0.01, 0.0008, 0.0009, None, 0.0005, 0.0004, 0.001, 0.02]
+    off = EdgeConfig(complete_unexplored_fraction=0.0)
+    assert not any(verdicts(off, tail))  # assignable frontiers left and the rule off
+    on = off.model_copy(update={"complete_unexplored_fraction": 0.001,
+                                "complete_unexplored_plans": 3})
+    # a grid-fallback plan (None) breaks the run; the third plan in a row at or under it ends
+    assert verdicts(on, tail) == [False] * 6 + [True, True]
+    small = CompletionJudge(on, tick_s=0.1)  # the map's minimum size still holds
+    assert not any(small.update(100 + 10 * k, 5, 10, 0.0) for k in range(5))
 
 
 def _one_frontier_at(xy: tuple[float, float]):

@@ -57,18 +57,27 @@ class CompletionJudge:
         self.config = config
         self.tick_s = tick_s
         self.empty_plans = 0
+        self.tail_plans = 0
         self.complete = False
         self.complete_tick: int | None = None
 
-    def update(self, tick: int, assignable_frontiers: int, known_cells: int) -> bool:
-        """Record one plan's outcome; returns the (sticky) verdict."""
+    def update(self, tick: int, assignable_frontiers: int, known_cells: int,
+               unexplored_fraction: float | None = None) -> bool:
+        """Record one plan's outcome; returns the (sticky) verdict. `unexplored_fraction`:
+        the assignable F_u regions' voxels over the merged map's (None: not asked, as in a
+        grid-fallback plan)."""
         if self.complete:
             return True
+        cfg = self.config
         self.empty_plans = self.empty_plans + 1 if assignable_frontiers == 0 else 0
+        tail = (cfg.complete_unexplored_fraction > 0 and unexplored_fraction is not None
+                and unexplored_fraction <= cfg.complete_unexplored_fraction)
+        self.tail_plans = self.tail_plans + 1 if tail else 0
         if (
-            self.empty_plans >= self.config.complete_after_plans
-            and known_cells >= self.config.complete_min_known_cells
-            and tick * self.tick_s >= self.config.complete_warmup_s
+            (self.empty_plans >= cfg.complete_after_plans
+             or self.tail_plans >= cfg.complete_unexplored_plans)
+            and known_cells >= cfg.complete_min_known_cells
+            and tick * self.tick_s >= cfg.complete_warmup_s
         ):
             self.complete = True
             self.complete_tick = tick

@@ -56,6 +56,7 @@ class Assignment:
     assigned: dict[int, int]
     new_goals: list[Goal]
     assignable: int  # frontiers neither blacklisted nor unreachable by every robot
+    unexplored_voxels: int = 0  # the assignable F_u regions' voxels, together
 
 
 class GoalBook:
@@ -242,7 +243,9 @@ class GoalBook:
         if self.config.planner == "space" and self.config.space_successor_m > 0:
             new_goals += self._successors(tick, robots, fields, frontiers, spec, scorer, poses,
                                           usable, assigned)
-        return Assignment(dict(sorted(assigned.items())), new_goals, int(usable.sum()))
+        unexplored = usable & ~frontiers.weak
+        return Assignment(dict(sorted(assigned.items())), new_goals, int(usable.sum()),
+                          int(frontiers.sizes[unexplored].sum()))
 
     def _tour_match(
         self, robots: list[int], kept: dict[int, int], path_m: np.ndarray,

@@ -8,6 +8,7 @@ them and judges completion. Everything is driven by message order and tick numbe
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
@@ -57,6 +58,9 @@ from services.edge_server.submap_store import SubmapStore
 
 if TYPE_CHECKING:
     from services.edge_server.merger import MapMerger
+
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -264,14 +268,18 @@ class EdgePlanner:
         reachable = fields.reachable
         goal_edt = goal_transform(self.book.goal_cells(reachable, spec))
         fs = self._frontiers(tick, snap, traversable, reachable, fields, robot_xy, goal_edt)
-        if self._fall_back_to_grid(fs, fields, tick):
+        fell_back = self._fall_back_to_grid(fs, fields, tick)
+        if fell_back:
             fallback = self.config.model_copy(
                 update={"frontier_min_cells": self.config.space_grid_fallback_min_cells})
             fs = grid_as_unexplored(detect_frontiers(snap.free, snap.known, reachable, spec,
                                                      fallback, goal_edt))
         poses = np.array([[self.poses[r].x, self.poses[r].y, self.poses[r].yaw] for r in robots])
         result = self.book.plan(tick, robots, fields, fs, spec, self.scorer, poses)
-        complete = self.judge.update(tick, result.assignable, int(snap.known.sum()))
+        fraction = (None if fell_back or self.config.planner != "space"  # the paper's: as written
+                    else result.unexplored_voxels / max(len(self.merged), 1))
+        log.debug("plan tick %d: unexplored fraction %s", tick, fraction)
+        complete = self.judge.update(tick, result.assignable, int(snap.known.sum()), fraction)
         grid_msg = OccupancyGrid(tick=tick, resolution_m=spec.resolution_m, origin_x=spec.origin_x,
                                  origin_y=spec.origin_y, cells=snap.cells)
         return PlanOutput(grid_msg, frontiers_message(tick, fs, complete, result.assigned,
