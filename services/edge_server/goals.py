@@ -243,7 +243,7 @@ class GoalBook:
         if self.config.planner == "space" and self.config.space_successor_m > 0:
             new_goals += self._successors(tick, robots, fields, frontiers, spec, scorer, poses,
                                           usable, assigned)
-        unexplored = usable & ~frontiers.weak
+        unexplored = usable if frontiers.weak is None else usable & ~frontiers.weak
         return Assignment(dict(sorted(assigned.items())), new_goals, int(usable.sum()),
                           int(frontiers.sizes[unexplored].sum()))
 
