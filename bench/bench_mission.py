@@ -104,6 +104,9 @@ def report(runs: list[dict], profiles: list[dict]) -> None:
     for key in keys:
         _row(key, [float(r[key]) for r in runs if r.get(key) is not None])
     _row("real-time factor", [float(p["real_time_factor"]) for p in profiles])
+    sampler = [float(p["sampler_core_pct"]) for p in profiles if p.get("sampler_core_pct")]
+    if sampler:  # the live coverage sampler's thread, % of one core over the wall time
+        _row("live sampler, % of a core", sampler)
     print("\n| CPU s per process | median | min | max |\n|---|---:|---:|---:|")
     for kind, values in cpu_rows(profiles).items():
         _row(kind, values)

@@ -289,6 +289,11 @@ class CloudRequest(Message):
     KIND: ClassVar[str] = "cloud_request"
     kind: Literal["cloud_request"] = "cloud_request"
     robot_id: int = Field(default=-1, ge=-1, le=255, description="-1 = merged P*, else robot's")
+    since_version: int | None = Field(
+        default=None, ge=-1,
+        description="None: the whole map, no keys. -1: the whole map with its voxel keys and "
+        "version. v >= 0: only the voxels added or moved since the edge's version v (the "
+        "whole map where it was rebuilt since)")
 
 
 class GridRequest(Message):
@@ -313,6 +318,26 @@ class Cloud(Message):
     robot_ids: Annotated[np.ndarray, ArraySpec("uint8", (None,), compress=True)] = Field(
         description="(N,) robot id of each point's first observer"
     )
+    voxel_keys: Annotated[np.ndarray, ArraySpec("int64", (None,), compress=True)] = Field(
+        default_factory=lambda: np.zeros(0, np.int64),
+        description="(N,) int64 packed world voxel key of each point, sorted (one point per "
+        "key), when the request gave since_version; else empty")
+    version: int = Field(default=0, ge=0, description="the edge's map version of this answer")
+    delta: bool = Field(default=False, description="only the voxels added or moved since the "
+                        "request's since_version: replace those keys, keep the rest")
+
+    @model_validator(mode="after")
+    def _keys_match_points(self) -> Cloud:
+        n = len(self.points_world)
+        if len(self.colors) != n or len(self.robot_ids) != n:
+            raise ValueError(f"colors and robot_ids must have the {n} rows of points_world")
+        if self.voxel_keys.size not in (0, n):
+            raise ValueError(f"voxel_keys holds {self.voxel_keys.size} keys for {n} points")
+        if self.voxel_keys.size > 1 and not np.all(np.diff(self.voxel_keys) > 0):
+            raise ValueError("voxel_keys must be sorted and unique")
+        if self.delta and self.voxel_keys.size != n:
+            raise ValueError("a delta cloud needs voxel_keys")
+        return self
 
 
 class SubmapInfo(Model):

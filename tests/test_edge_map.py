@@ -132,6 +132,68 @@ def test_robot_cloud_kept_up_to_date_equals_from_scratch() -> None:
     assert rebuilds > 0 and len(merged.robot_cloud(0)[0]) > 100
 
 
+class Mirror:
+    """A reader's copy of one map kept by `cloud_view` deltas (as the live sampler keeps it)."""
+
+    def __init__(self) -> None:
+        self.version, self.keys, self.points = -1, np.zeros(0, np.int64), np.zeros((0, 3))
+        self.wholes = self.deltas = 0
+
+    def sync(self, merged: MergedMap, robot: int) -> None:
+        view = merged.cloud_view(robot, self.version)
+        assert np.all(np.diff(view.keys) > 0)
+        if view.delta:
+            self.deltas += 1
+            pos = np.searchsorted(self.keys, view.keys)
+            held = pos < self.keys.size
+            held[held] = self.keys[pos[held]] == view.keys[held]
+            self.points[pos[held]] = view.points_world[held]
+            self.keys = np.insert(self.keys, pos[~held], view.keys[~held])
+            self.points = np.insert(self.points, pos[~held], view.points_world[~held], axis=0)
+        else:
+            self.wholes += 1
+            self.keys, self.points = view.keys, view.points_world.astype(np.float64)
+        self.version = view.version
+
+
+def test_cloud_view_deltas_rebuild_the_whole_map() -> None:
+    """A reader that applies each answer's changes holds exactly the whole map, through
+    appended voxels, refined means and corrected poses, for P* and each robot's own map,
+    whatever the query timing; and a delta is smaller than the map."""
+    rng = np.random.default_rng(1)
+    store, merged = SubmapStore(V), MergedMap(V)
+    seq = {0: 0, 1: 0}
+    poses = {(r, s): T_from_xyyaw(0.1 * s, 0.05 * r, 0.0) for r in (0, 1) for s in range(3)}
+    mirrors = {robot: Mirror() for robot in (-1, 0, 1)}
+    small = 0
+    for tick in range(1, 60):
+        for _ in range(3):
+            robot, sub = int(rng.integers(2)), int(rng.integers(3))
+            idx = rng.integers(0, 12, (int(rng.integers(1, 15)), 3))
+            means = voxel_centres(idx) + rng.uniform(-0.02, 0.02, idx.shape)
+            store.apply(make_submap(robot, sub, seq[robot], tick, poses[robot, sub], means))
+            seq[robot] += 1
+        if rng.random() < 0.1:
+            key = next(iter(sorted(store.submaps)))
+            store.set_pose(key, T_from_xyyaw(rng.uniform(-0.2, 0.2), 0.0, rng.uniform(0, 1)))
+        merged.update(store)
+        for robot, mirror in mirrors.items():
+            if rng.random() < 0.5:
+                continue
+            before = merged.cloud_view(robot, mirror.version)
+            small += before.delta and len(before.keys) < len(mirror.keys)
+            mirror.sync(merged, robot)
+            whole = merged.cloud_view(robot, -1)
+            assert not whole.delta
+            np.testing.assert_array_equal(mirror.keys, whole.keys)
+            np.testing.assert_array_equal(mirror.points, whole.points_world)
+    assert all(m.deltas > 5 for m in mirrors.values())
+    assert mirrors[-1].wholes > 1 and mirrors[0].wholes > 1  # (0, 0) moved: rebuilds
+    assert small > 10
+    later = merged.cloud_view(-1, merged.cloud_version + 5)  # a version this edge never had
+    assert not later.delta and len(later.keys) == len(merged)
+
+
 def test_grid_from_free_cells_and_obstacles() -> None:
     config = EdgeConfig(grid_margin_m=0.5, grid_chunk_m=0.5)
     store, merged, grid = SubmapStore(V), MergedMap(V), MergedGrid(config)

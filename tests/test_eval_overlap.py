@@ -83,7 +83,7 @@ def test_overlap_pct_is_truth_covered_twice_of_truth_covered() -> None:
 def test_time_series_row_and_metrics_json_agree(tmp_path: Path) -> None:
     pr, maps = probe(), own_maps()
     cloud = merged_cloud(maps)
-    row = series_row(pr, cloud, maps, None, 0.1, 0)
+    row = series_row(pr, cloud, None, None, 0.1, 0, maps)
     metrics = metrics_json(pr, cloud, maps, [row])
     truth = pr.gt.observable_points_world
     expected = mx.overlap_3d(maps, truth, pr.ev.coverage_radius_m)

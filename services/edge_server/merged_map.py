@@ -14,6 +14,11 @@ Each robot's own map (`robot_cloud`, the live evaluator's overlap asks for it ev
 seconds, under the edge's lock) is kept the same way: per robot, the voxels of the parts it was
 built from, extended by what those parts appended since and rebuilt only when one of that
 robot's submaps moved.
+
+`cloud_view` answers "what changed since version v" for either kind of map: every voxel
+carries the `cloud_version` it was added at, every part's point the version it last moved
+at, and a rebuild (voxels may have gone) makes the answer whole again. The live evaluator
+then reads what changed, not the whole map, every few sim seconds.
 """
 
 from __future__ import annotations
@@ -39,6 +44,20 @@ class _WorldPart:
     uid: int = 0  # the submap's number in this map: a voxel's source is (uid, index)
     points_world: np.ndarray | None = None  # (n, 3) float32 mean points, for `points_stamp`
     points_stamp: tuple[int, int, int] = (-1, -1, -1)  # (submap version, pose version, n)
+    point_versions: np.ndarray | None = None  # (n,) cloud_version each point last moved at
+
+
+@dataclass(frozen=True)
+class CloudView:
+    """A map as of `version`, whole or (`delta`) only the voxels added or moved since the
+    version asked about; arrays sorted by key."""
+
+    version: int
+    delta: bool
+    keys: np.ndarray  # (N,) int64 packed world voxel keys, sorted
+    points_world: np.ndarray  # (N, 3) float32
+    colors: np.ndarray  # (N, 3) uint8
+    robot_ids: np.ndarray  # (N,) uint8 first observer
 
 
 def _to_world_keys(sm: StoredSubmap, start: int, voxel_m: float) -> np.ndarray:
@@ -69,6 +88,8 @@ class _RobotMap:
     src_idx: np.ndarray
     points: np.ndarray | None = None
     points_stamp: int = -1
+    added_at: np.ndarray | None = None  # (N,) cloud_version each voxel was added at
+    rebuilt_at: int = 0
 
 
 def _insert_new(
@@ -102,6 +123,9 @@ class MergedMap:
         self._points_version = 0  # bumps when a part's mean points are taken again
         self._store_version = -1
         self.version = 0  # bumps whenever the merged set changes
+        self.cloud_version = 0  # bumps whenever a cloud would differ (keys or points)
+        self.rebuilt_at = 0  # cloud_version of the last rebuild (voxels may have gone)
+        self.added_at = np.zeros(0, np.int64)  # per voxel: cloud_version it was added at
         # keys the last update inserted; None after a rebuild (voxels may have been removed)
         self.added_keys: np.ndarray | None = np.zeros(0, np.int64)
         self._robot_maps: dict[int, _RobotMap] = {}
@@ -133,31 +157,45 @@ class MergedMap:
                 part.colors = np.concatenate([part.colors, new_colors])
                 part.first_tick = np.concatenate([part.first_tick, new_ticks])
                 part.n = sm.keys.size
-        if self._snapshot_points(store):
+        v = self.cloud_version + 1
+        if self._snapshot_points(store, v):
             self._points = None
+            self.cloud_version = v
         if rebuild:
             self._rebuild(store)
             self.added_keys = None
+            self.added_at = np.full(self.keys.size, v, np.int64)
+            self.rebuilt_at = v
         elif deltas:
-            self._merge_delta(*(np.concatenate(parts) for parts in zip(*deltas, strict=True)))
+            self._merge_delta(*(np.concatenate(parts) for parts in zip(*deltas, strict=True)),
+                              version=v)
         else:
             return False
+        self.cloud_version = v
         self._centres = self._points = None
         self.version += 1
         return True
 
-    def _snapshot_points(self, store: SubmapStore) -> bool:
+    def _snapshot_points(self, store: SubmapStore, version: int) -> bool:
         """Take the world mean points of every part whose submap changed: here, at the
         update, so that the points, like the keys, are those of the messages the update saw
-        (later deltas refine a submap's points in place). True when any was taken."""
+        (later deltas refine a submap's points in place); points that moved are stamped
+        `version`. True when any was taken."""
         taken = False
         for sm in store.ordered():
             part = self._parts[sm.key]
             stamp = (sm.version, sm.pose_version, part.n)
             if part.points_stamp != stamp:
-                part.points_world = transform_points(
+                points = transform_points(
                     sm.T_world_submap, sm.points[: part.n].astype(np.float64)
                 ).astype(np.float32)
+                versions = np.full(part.n, version, np.int64)
+                old, old_versions = part.points_world, part.point_versions
+                if old is not None and old_versions is not None:
+                    k = min(old.shape[0], part.n)
+                    same = np.all(old[:k] == points[:k], axis=1)
+                    versions[:k][same] = old_versions[:k][same]
+                part.points_world, part.point_versions = points, versions
                 part.points_stamp = stamp
                 taken = True
         self._points_version += taken
@@ -180,13 +218,14 @@ class MergedMap:
 
     def _merge_delta(
         self, keys: np.ndarray, colors: np.ndarray, ticks: np.ndarray, robots: np.ndarray,
-        uids: np.ndarray, src: np.ndarray,
+        uids: np.ndarray, src: np.ndarray, version: int,
     ) -> None:
         keys, idx = _first_observed(keys, ticks, robots)
-        values = [self.colors, self.robot_ids, self.src_uid, self.src_idx]
+        values = [self.colors, self.robot_ids, self.src_uid, self.src_idx, self.added_at]
         self.keys, values, self.added_keys = _insert_new(
-            self.keys, values, keys, [colors[idx], robots[idx], uids[idx], src[idx]])
-        self.colors, self.robot_ids, self.src_uid, self.src_idx = values
+            self.keys, values, keys, [colors[idx], robots[idx], uids[idx], src[idx],
+                                      np.full(keys.size, version, np.int64)])
+        self.colors, self.robot_ids, self.src_uid, self.src_idx, self.added_at = values
 
     # -- read ------------------------------------------------------------------------------
     @property
@@ -204,21 +243,44 @@ class MergedMap:
             self._points = self._gather(self.src_uid, self.src_idx)
         return self._points
 
-    def _gather(self, src_uid: np.ndarray, src_idx: np.ndarray) -> np.ndarray:
-        """(N, 3) float32 world mean points of the voxels at (uid, index)."""
+    def _gather(self, src_uid: np.ndarray, src_idx: np.ndarray,
+                versions: bool = False) -> np.ndarray:
+        """(N, 3) float32 world mean points of the voxels at (uid, index), or with
+        `versions` (N,) the cloud_version each of those points last moved at."""
         if src_uid.size == 0:
-            return np.zeros((0, 3), np.float32)
+            return np.zeros(0, np.int64) if versions else np.zeros((0, 3), np.float32)
         by_uid = {p.uid: p for p in self._parts.values()}
         used = np.unique(src_uid)
         offsets = np.zeros(int(used.max()) + 1, np.int64)
         blocks, at = [], 0
         for uid in used.tolist():
-            part = by_uid[uid]
-            assert part.points_world is not None  # taken by the update that added its voxels
-            blocks.append(part.points_world)
+            block = by_uid[uid].point_versions if versions else by_uid[uid].points_world
+            assert block is not None  # taken by the update that added its voxels
+            blocks.append(block)
             offsets[uid] = at
-            at += part.points_world.shape[0]
+            at += block.shape[0]
         return np.concatenate(blocks)[offsets[src_uid] + src_idx]
+
+    def cloud_view(self, robot_id: int, since: int) -> CloudView:
+        """P* (robot_id −1) or one robot's own map: whole when `since` is −1 or older than
+        the map's last rebuild (or newer than this map: another edge's), else only the
+        voxels added or whose point moved after version `since`."""
+        if robot_id < 0:
+            keys, colors, robots = self.keys, self.colors, self.robot_ids
+            points, added_at, rebuilt_at = self.points_world, self.added_at, self.rebuilt_at
+            src_uid, src_idx = self.src_uid, self.src_idx
+        else:
+            points, colors = self.robot_cloud(robot_id)
+            cached = self._robot_maps[robot_id]
+            assert cached.added_at is not None  # set when the map was built
+            keys, added_at, rebuilt_at = cached.keys, cached.added_at, cached.rebuilt_at
+            robots = np.full(keys.size, robot_id, np.uint8)
+            src_uid, src_idx = cached.src_uid, cached.src_idx
+        delta = rebuilt_at <= since <= self.cloud_version
+        if delta:
+            changed = np.maximum(added_at, self._gather(src_uid, src_idx, versions=True)) > since
+            keys, points, colors, robots = (a[changed] for a in (keys, points, colors, robots))
+        return CloudView(self.cloud_version, delta, keys, points, colors, robots)
 
     def __len__(self) -> int:
         return int(self.keys.size)
@@ -232,8 +294,10 @@ class MergedMap:
         if cached is None or any(k in cached.taken and cached.taken[k][0] != p.pose_version
                                  for k, p in parts.items()):
             cached = _robot_map(parts)  # first time, or a submap moved: from scratch
+            cached.added_at = np.full(cached.keys.size, self.cloud_version, np.int64)
+            cached.rebuilt_at = self.cloud_version
         else:
-            _extend(cached, parts)
+            _extend(cached, parts, self.cloud_version)
         self._robot_maps[robot_id] = cached
         if cached.points is None or cached.points_stamp != self._points_version:
             cached.points = self._gather(cached.src_uid, cached.src_idx)
@@ -269,7 +333,7 @@ def _robot_map(parts: dict[SubmapKey, _WorldPart]) -> _RobotMap:
     return _RobotMap(taken, uniq, colors, uids[idx], src[idx])
 
 
-def _extend(cached: _RobotMap, parts: dict[SubmapKey, _WorldPart]) -> None:
+def _extend(cached: _RobotMap, parts: dict[SubmapKey, _WorldPart], version: int) -> None:
     """Add the voxels the robot's unmoved parts appended since `cached` was built. They
     arrived in later plans, so later ticks: a voxel already held keeps its first observer."""
     new: list[tuple[np.ndarray, ...]] = []
@@ -285,8 +349,9 @@ def _extend(cached: _RobotMap, parts: dict[SubmapKey, _WorldPart]) -> None:
         return
     keys, ticks, colors, uids, src = (np.concatenate(a) for a in zip(*new, strict=True))
     keys, idx = _first_observed(keys, ticks, np.zeros(keys.size, np.uint8))
+    assert cached.added_at is not None  # set when the map was built
     cached.keys, values, _ = _insert_new(
-        cached.keys, [cached.colors, cached.src_uid, cached.src_idx], keys,
-        [colors[idx], uids[idx], src[idx]])
-    cached.colors, cached.src_uid, cached.src_idx = values
+        cached.keys, [cached.colors, cached.src_uid, cached.src_idx, cached.added_at], keys,
+        [colors[idx], uids[idx], src[idx], np.full(keys.size, version, np.int64)])
+    cached.colors, cached.src_uid, cached.src_idx, cached.added_at = values
     cached.points = None

@@ -53,9 +53,15 @@ def _subscribe(bus: Bus) -> None:
 
 
 def cloud_reply(planner: EdgePlanner, tick: int, body: bytes, max_bytes: int) -> Cloud:
-    """P* (robot_id −1 or an empty body) or one robot's own map for a `map/cloud` query."""
+    """P* (robot_id −1 or an empty body) or one robot's own map for a `map/cloud` query;
+    with `since_version`, keyed and versioned, and only what changed when it can be."""
     request = decode(body, CloudRequest, max_bytes) if body else CloudRequest()
     merged = planner.merged
+    if request.since_version is not None:
+        view = merged.cloud_view(request.robot_id, request.since_version)
+        return Cloud(tick=tick, robot_id=request.robot_id, points_world=view.points_world,
+                     colors=view.colors, robot_ids=view.robot_ids, voxel_keys=view.keys,
+                     version=view.version, delta=view.delta)
     if request.robot_id < 0:
         return Cloud(tick=tick, points_world=merged.points_world.astype(np.float32),
                      colors=merged.colors, robot_ids=merged.robot_ids)

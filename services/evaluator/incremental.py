@@ -18,9 +18,11 @@ The figures equal `scoring.map_quality`'s on the same points exactly, not approx
   made once, when it appears; the voxels' verdicts are redrawn each sample from those (the
   edge's maps are voxel means, several to a voxel at this size), and a point whose voxel
   turned ghost or stopped being one is taken back or scored like one that went or came.
-A point is known by its exact coordinates (`point_ids`): one that moved is a removal plus an
-addition. A map holding one point twice is refused (`MapTally.update` returns False; the
-caller scores from scratch).
+A point is known by its exact coordinates (`point_ids`), or by the edge's voxel key where the
+sampler asks the edge for what changed since its last sample (`MapTally.apply`): then a sample
+costs the points that changed, not the map. One that moved is a removal plus an addition. A
+map holding one point twice is refused (`MapTally.update` returns False; the caller scores
+from scratch).
 """
 
 from __future__ import annotations
@@ -94,69 +96,124 @@ def point_ids(pts: np.ndarray) -> np.ndarray:
     return _mix(_mix(_mix(bits[:, 0]) ^ bits[:, 1]) ^ bits[:, 2])
 
 
-@dataclass(frozen=True)
-class _Change:
-    """A map's next points (sorted by id) against the tally's: which are new, which old
-    ones are gone."""
+def keyed_ids(keys: np.ndarray) -> np.ndarray:
+    """(N,) uint64 ids of points known by an int64 key (the edge's world voxel keys, one
+    point per key), in the keys' order: a sorted key array stays sorted."""
+    return np.asarray(keys, np.int64).view(np.uint64) ^ np.uint64(1 << 63)
 
-    ids: np.ndarray
-    pts: np.ndarray
-    same: np.ndarray  # per new point: held before at the same coordinates
-    pos: np.ndarray  # per new point: its index before, where `same`
-    gone: np.ndarray  # per old point: no longer held
+
+def _member(keys: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:
+    """(N,) bool: each key is in `sorted_set` (sorted, unique)."""
+    if sorted_set.size == 0:
+        return np.zeros(keys.size, bool)
+    i = np.minimum(np.searchsorted(sorted_set, keys), sorted_set.size - 1)
+    return sorted_set[i] == keys
 
 
 class MapTally:
     """One map's points (sorted by id) and the truth points its counting points cover
     (`metrics.covered_mask`). With a ghost test, a voxel all of whose points fail it is a
-    ghost: its points are kept but do not count (`Probe.ghost_point_mask`)."""
+    ghost: its points are kept but do not count (`Probe.ghost_point_mask`). The voxels'
+    verdicts are kept as counts per voxel (points held, points that pass the test) and
+    redrawn for the voxels a sample touched only.
+
+    Two ways in: `update(points)`, the whole map, its points known by their coordinates;
+    `apply(ids, points, whole)`, points known by a key (`keyed_ids`), either the whole map
+    or (whole=False) only those added or moved since the last call, which costs what changed.
+    """
 
     def __init__(self, truth: TruthIndex, voxel_m: float, ghost: GhostTest | None) -> None:
         self.truth, self.voxel_m, self.ghost = truth, voxel_m, ghost
+        self.keyed = False  # ids are keyed_ids (apply), not coordinate hashes (update)
         self.ids = np.zeros(0, np.uint64)
         self.points = np.zeros((0, 3))
         self.near = np.zeros(0, bool)  # per point: passes the ghost test on its own
         self.counting = np.zeros(0, bool)
+        self.voxel = np.zeros(0, np.int64)  # per point: its voxel's key
+        self.cell = np.zeros(0, np.int64)  # per point: its truth cell (TruthIndex.cells_of)
         self.covered = np.zeros(len(truth), bool)
+        self.vkeys = np.zeros(0, np.int64)  # sorted keys of the occupied voxels
+        self.vpoints = np.zeros(0, np.int64)  # per voxel: points held
+        self.vnear = np.zeros(0, np.int64)  # per voxel: points that pass the ghost test
         self.n_voxels = 0
         self.n_ghost = 0
 
     def update(self, points: np.ndarray) -> bool:
         """Make the tally that of `points`; False (tally unchanged) when two are equal."""
-        change = self.diff(points)
-        if change is None:
-            return False
-        same, pos = change.same, change.pos
-        near = np.empty(change.ids.size, bool)
-        near[same] = self.near[pos[same]]
-        near[~same] = self.near_of(change.pts[~same])
-        counting = self._counting(change.pts, near)
-        was = np.zeros(change.ids.size, bool)
-        was[same] = self.counting[pos[same]]
-        kept = np.zeros(self.ids.size, bool)  # old points still held and still counting
-        kept[pos[same & counting]] = True
-        lost = self.points[self.counting & ~kept]  # went, or their voxel became a ghost
-        gained = change.pts[counting & ~was]
-        self.ids, self.points, self.near, self.counting = change.ids, change.pts, near, counting
-        self._cover(gained)
-        self._uncover(lost)
-        return True
-
-    def diff(self, points: np.ndarray) -> _Change | None:
-        """How `points` differ from the tally's; None when two of them are equal."""
         pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         ids = point_ids(pts)
         order = np.argsort(ids, kind="stable")
         ids, pts = ids[order], pts[order]
         if np.any(ids[1:] == ids[:-1]):
-            return None
-        pos = np.searchsorted(self.ids, ids)
-        same = pos < self.ids.size
-        same[same] = self.ids[pos[same]] == ids[same]
-        same[same] = np.all(self.points[pos[same]] == pts[same], axis=1)
-        gone = np.ones(self.ids.size, bool)
-        gone[pos[same]] = False
-        return _Change(ids, pts, same, pos, gone)
+            return False
+        if self.keyed:
+            self._apply(np.ones(self.ids.size, bool), ids, pts)
+        else:
+            same, removed = self._match(ids, pts, whole=True)
+            if np.any(_member(ids[~same], self.ids[~removed])):  # a hash shared: refuse
+                return False
+            self._apply(removed, ids[~same], pts[~same])
+        self.keyed = False
+        return True
+
+    def apply(self, ids: np.ndarray, points: np.ndarray, whole: bool) -> bool:
+        """Make the tally that of keyed points (`ids` sorted, unique): these and no others
+        (`whole`), or these replacing or joining the held ones. False (tally unchanged) for
+        a change to a tally that does not hold keyed points, or ids out of order."""
+        ids = np.asarray(ids, np.uint64)
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if (not whole and not self.keyed) or np.any(ids[1:] <= ids[:-1]):
+            return False
+        if self.keyed or not whole:
+            same, removed = self._match(ids, pts, whole)
+        else:  # hashed ids never match keyed ones
+            same, removed = np.zeros(ids.size, bool), np.ones(self.ids.size, bool)
+        self._apply(removed, ids[~same], pts[~same])
+        self.keyed = True
+        return True
+
+    def _match(self, ids: np.ndarray, pts: np.ndarray, whole: bool
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """Per given point: held already at the same coordinates; per held point: removed
+        (not among the given ones when `whole`; given with other coordinates)."""
+        pos = np.searchsorted(self.ids, ids)  # sorted needles: a fast, forward search
+        found = pos < self.ids.size
+        found[found] = self.ids[pos[found]] == ids[found]
+        same = found.copy()
+        same[found] = np.all(self.points[pos[found]] == pts[found], axis=1)
+        if whole:
+            removed = np.ones(self.ids.size, bool)
+            removed[pos[same]] = False
+        else:
+            removed = np.zeros(self.ids.size, bool)
+            removed[pos[found & ~same]] = True
+        return same, removed
+
+    def _apply(self, removed: np.ndarray, add_ids: np.ndarray, add_pts: np.ndarray) -> None:
+        """Take back the `removed` held points and score the new ones (sorted ids, none a
+        kept point's)."""
+        keep = ~removed
+        add_near = self.near_of(add_pts)
+        add_voxel = voxels.pack(voxels.voxel_indices(add_pts, self.voxel_m))
+        flipped = self._recount(self.voxel[removed], self.near[removed], add_voxel, add_near)
+        was = self.counting[keep]
+        kept = was.copy()  # a held point's verdict changes only with its voxel's
+        kept_voxel = self.voxel[keep]
+        hit = _member(kept_voxel, flipped)
+        kept[hit] = self._cleared(kept_voxel[hit])
+        add_counting = self._cleared(add_voxel)
+        kept_points = self.points[keep]
+        lost = np.concatenate([self.points[removed & self.counting], kept_points[was & ~kept]])
+        gained = np.concatenate([add_pts[add_counting], kept_points[kept & ~was]])
+        at = np.searchsorted(self.ids[keep], add_ids)
+        self.ids = np.insert(self.ids[keep], at, add_ids)
+        self.points = np.insert(kept_points, at, add_pts, axis=0)
+        self.near = np.insert(self.near[keep], at, add_near)
+        self.counting = np.insert(kept, at, add_counting)
+        self.voxel = np.insert(kept_voxel, at, add_voxel)
+        self.cell = np.insert(self.cell[keep], at, self.truth.cells_of(add_pts))
+        self._cover(gained)
+        self._uncover(lost, gained)
 
     def near_of(self, new_pts: np.ndarray) -> np.ndarray:
         """Which new points pass the ghost test on their own (all, without one)."""
@@ -164,16 +221,37 @@ class MapTally:
             return np.ones(len(new_pts), bool)
         return ~self.ghost(new_pts)
 
-    def _counting(self, pts: np.ndarray, near: np.ndarray) -> np.ndarray:
-        """Per point: its voxel holds a point that passes the ghost test; the voxel counts."""
-        if self.ghost is None:  # every point counts; the voxels are not asked for
-            return np.ones(len(pts), bool)
-        keys = voxels.pack(voxels.voxel_indices(pts, self.voxel_m))
-        uniq, inverse = np.unique(keys, return_inverse=True)
-        cleared = np.zeros(uniq.size, bool)
-        cleared[inverse[near]] = True
-        self.n_voxels, self.n_ghost = int(uniq.size), int(uniq.size - np.count_nonzero(cleared))
-        return cleared[inverse]
+    def _recount(self, gone_voxel: np.ndarray, gone_near: np.ndarray,
+                 add_voxel: np.ndarray, add_near: np.ndarray) -> np.ndarray:
+        """Move the per-voxel counts by the points that went and came; the sorted keys of
+        the voxels whose verdict (holds a point that passes the ghost test) changed."""
+        touched = np.unique(np.concatenate([gone_voxel, add_voxel]))
+        new = touched[~_member(touched, self.vkeys)]
+        if new.size:
+            at = np.searchsorted(self.vkeys, new)
+            self.vkeys = np.insert(self.vkeys, at, new)
+            self.vpoints = np.insert(self.vpoints, at, 0)
+            self.vnear = np.insert(self.vnear, at, 0)
+        where = np.searchsorted(self.vkeys, touched)
+        before = self.vnear[where] > 0
+        for keys, near, sign in ((gone_voxel, gone_near, -1), (add_voxel, add_near, 1)):
+            i = np.searchsorted(self.vkeys, keys)
+            np.add.at(self.vpoints, i, sign)
+            np.add.at(self.vnear, i[near], sign)
+        flipped = touched[before != (self.vnear[where] > 0)]
+        if np.any(self.vpoints[where] == 0):
+            alive = self.vpoints > 0
+            self.vkeys, self.vpoints, self.vnear = (
+                self.vkeys[alive], self.vpoints[alive], self.vnear[alive])
+        self.n_voxels = int(self.vkeys.size)
+        self.n_ghost = int(self.n_voxels - np.count_nonzero(self.vnear))
+        return flipped
+
+    def _cleared(self, voxel: np.ndarray) -> np.ndarray:
+        """Per point (by its voxel's key, held): its voxel counts (all do without a test)."""
+        if self.ghost is None:
+            return np.ones(voxel.size, bool)
+        return self.vnear[np.searchsorted(self.vkeys, voxel)] > 0
 
     def _cover(self, new: np.ndarray) -> None:
         """Truth the new counting points cover (only uncovered truth around them is asked)."""
@@ -182,18 +260,34 @@ class MapTally:
         r = self.truth.radius_m
         self.covered[cand] = mx.covered_mask(new, self.truth.points[cand], r)
 
-    def _uncover(self, gone: np.ndarray) -> None:
+    def _uncover(self, gone: np.ndarray, gained: np.ndarray) -> None:
         """Covered truth around points that went is asked again of the counting points left
-        around it (those within the radius of it lie in the cells around it)."""
+        around it (those within the radius of it lie in the cells around it); first of the
+        points that came, which hold most of it where points moved inside their voxels."""
         cand = self.truth.around(gone)
         cand = cand[self.covered[cand]]
+        r = self.truth.radius_m
+        if cand.size:  # only truth within the radius of a point that went can lose its cover
+            cand = cand[mx.covered_mask(gone, self.truth.points[cand], r)]
+        if cand.size and len(gained):
+            cand = cand[~mx.covered_mask(gained, self.truth.points[cand], r)]
         if cand.size == 0:
             return
         truth = self.truth.points[cand]
-        near = np.isin(self.truth.cells_of(self.points),
-                       (np.unique(self.truth.cells_of(truth))[:, None] + NEIGHBOURS).ravel())
-        local = self.points[near & self.counting]
+        cells = np.unique((np.unique(self.truth.cells_of(truth))[:, None] + NEIGHBOURS).ravel())
+        local = self.points[_member(self.cell, cells) & self.counting]
         self.covered[cand] = mx.covered_mask(local, truth, self.truth.radius_m)
+
+
+@dataclass(frozen=True)
+class MapChange:
+    """One map as a sample sees it: the whole map, its points known by their coordinates
+    (ids None), or points known by key (`keyed_ids`), the whole map or only those added or
+    moved since the last sample (whole=False)."""
+
+    points: np.ndarray  # (N, 3) world frame, metres
+    ids: np.ndarray | None = None  # (N,) uint64 sorted keyed_ids
+    whole: bool = True
 
 
 class LiveQuality:
@@ -214,17 +308,23 @@ class LiveQuality:
     def __call__(
         self, points_world: np.ndarray, robot_points: Sequence[np.ndarray] | None
     ) -> dict[str, float | None]:
-        """The figures of these maps; from scratch (`map_quality`) where a map holds one
-        point twice."""
+        """The figures of these whole maps; from scratch (`map_quality`) where a map holds
+        one point twice."""
         robot_points = list(robot_points or [])
-        if len(self.robots) != len(robot_points):
-            self.robots = [MapTally(self.truth, self.probe.ev.voxel_m, None)
-                           for _ in robot_points]
-        ok = [t.update(p) for t, p in zip([self.merged, *self.robots],
-                                          [points_world, *robot_points], strict=True)]
-        if not all(ok):
+        figures = self.apply(MapChange(points_world), [MapChange(p) for p in robot_points])
+        if figures is None:
             return map_quality(self.probe, points_world, robot_points)
-        return self.figures(bool(robot_points))
+        return figures
+
+    def apply(self, merged: MapChange, robots: Sequence[MapChange]
+              ) -> dict[str, float | None] | None:
+        """The figures after these changes; None where a tally refused one (a point held
+        twice, a change to a map it does not hold keyed): the caller then sends whole maps."""
+        if len(self.robots) != len(robots):
+            self.robots = [MapTally(self.truth, self.probe.ev.voxel_m, None) for _ in robots]
+        ok = [t.update(c.points) if c.ids is None else t.apply(c.ids, c.points, c.whole)
+              for t, c in zip([self.merged, *self.robots], [merged, *robots], strict=True)]
+        return self.figures(bool(robots)) if all(ok) else None
 
     def figures(self, with_overlap: bool) -> dict[str, float | None]:
         """The tallies' figures, with `map_quality`'s formulas."""

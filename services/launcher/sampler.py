@@ -1,8 +1,10 @@
 """Live queries of the edge's maps: per-robot clouds and grids, and a coverage time series
 sampled every few sim seconds on a background thread: coverage, BV and ghost volume from the
 merged cloud, 3D overlap from each robot's own map, with metrics.json's formulas. The sampler
-scores each map incrementally (`LiveQuality`: only points new since the last sample), so its
-figures equal `map_quality`'s at a fraction of the CPU the mission shares.
+asks the edge for what changed in each map since its last sample (`CloudRequest.
+since_version`: voxels added or whose point moved, or the whole map after a rebuild) and
+scores only that (`LiveQuality.apply`), so its figures equal `map_quality`'s at a fraction of
+the CPU the mission shares; it keeps a copy of the merged map for the recorders.
 
 In lockstep the simulator does not wait for the launcher, so a sample is stamped with the
 tick the edge had reached when it answered (Cloud.tick), not the tick that was asked for.
@@ -13,7 +15,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any, Protocol
 
 import numpy as np
@@ -21,7 +23,7 @@ import numpy as np
 from schemas import messages as m
 from schemas.codec import DecodeError
 from services.common.bus import Bus
-from services.evaluator.incremental import LiveQuality
+from services.evaluator.incremental import LiveQuality, MapChange, keyed_ids
 from services.evaluator.scoring import Probe, map_quality
 from services.launcher.monitor import Monitor
 
@@ -77,19 +79,15 @@ def robot_clouds(
     return out, " + ".join(sorted(sources))
 
 
-Quality = Callable[[np.ndarray, Sequence[np.ndarray]], dict[str, float | None]]
-
-
-def series_row(probe: Probe, cloud: m.Cloud, robot_points: Sequence[np.ndarray],
+def series_row(probe: Probe, cloud: m.Cloud, quality: dict[str, float | None] | None,
                grid: m.OccupancyGrid | None, tick_s: float, frontiers: int,
-               quality_of: Quality | None = None) -> dict[str, Any]:
-    """One time-series row: the merged cloud's figures and the overlap of `robot_points`, the
-    robots' own maps, by `quality_of` (default `map_quality` from scratch, as metrics.json)."""
-    pts = cloud.points_world.astype(np.float64)
-    if quality_of is None:
-        quality = map_quality(probe, pts, robot_points)
-    else:
-        quality = quality_of(pts, robot_points)
+               robot_points: Sequence[np.ndarray] = ()) -> dict[str, Any]:
+    """One time-series row: the merged cloud's figures and the robots' own maps' overlap, as
+    `quality` gives them (None: `map_quality` of the cloud and `robot_points`, from scratch,
+    as metrics.json)."""
+    pts = cloud.points_world
+    if quality is None:
+        quality = map_quality(probe, pts.astype(np.float64), robot_points)
     known = int((grid.cells >= 0).sum()) if grid is not None else 0
     return {
         "sim_time_s": round(cloud.tick * tick_s, 6),
@@ -102,6 +100,38 @@ def series_row(probe: Probe, cloud: m.Cloud, robot_points: Sequence[np.ndarray],
         "frontiers": frontiers,
         "map_points": len(pts),
     }
+
+
+class CloudMirror:
+    """The sampler's copy of one edge map, kept by the edge's answers: whole ones replace it,
+    delta ones replace or add the voxels they carry (by key)."""
+
+    def __init__(self) -> None:
+        self.keys = np.zeros(0, np.int64)
+        self.cloud = m.Cloud(tick=0, points_world=np.zeros((0, 3), np.float32),
+                             colors=np.zeros((0, 3), np.uint8), robot_ids=np.zeros(0, np.uint8))
+
+    def apply(self, reply: m.Cloud) -> m.Cloud:
+        """The whole map after `reply` (a validated Cloud)."""
+        if not reply.delta:
+            self.keys, self.cloud = reply.voxel_keys, reply
+            return reply
+        pos = np.searchsorted(self.keys, reply.voxel_keys)
+        held = pos < self.keys.size
+        held[held] = self.keys[pos[held]] == reply.voxel_keys[held]
+        at, new = pos[~held], ~held
+        arrays = []
+        for mine, theirs in ((self.cloud.points_world, reply.points_world),
+                             (self.cloud.colors, reply.colors),
+                             (self.cloud.robot_ids, reply.robot_ids)):
+            mine = mine.copy()
+            mine[pos[held]] = theirs[held]
+            arrays.append(np.insert(mine, at, theirs[new], axis=0))
+        self.keys = np.insert(self.keys, at, reply.voxel_keys[new])
+        self.cloud = m.Cloud(tick=reply.tick, robot_id=reply.robot_id, points_world=arrays[0],
+                             colors=arrays[1], robot_ids=arrays[2], voxel_keys=self.keys,
+                             version=reply.version)
+        return self.cloud
 
 
 class SampleSink(Protocol):
@@ -119,6 +149,9 @@ class CoverageSampler:
         self.rows: list[dict[str, Any]] = []
         self.sinks: list[SampleSink] = []
         self.quality = LiveQuality(probe)
+        self.merged = CloudMirror()
+        self.versions: dict[int, int] = {}  # per map (-1 merged): the edge version held
+        self.cpu_s = 0.0  # the sampling thread's own CPU time (profile.json: `sampler_cpu_s`)
         self._scoring = threading.Lock()  # the final map is added from the main thread
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="coverage-sampler", daemon=True)
@@ -134,19 +167,65 @@ class CoverageSampler:
 
     def _loop(self) -> None:
         due = self.every_s
+        start = time.thread_time()
         while not self._stop.wait(0.05):
+            self.cpu_s = time.thread_time() - start
             if self.monitor.sim_time_s < due:
                 continue
             self.sample()
             due = (np.floor(self.monitor.sim_time_s / self.every_s) + 1) * self.every_s
+        self.cpu_s = time.thread_time() - start
+        log.info("coverage sampler: %d rows, %.2f CPU-s", len(self.rows), self.cpu_s)
 
     def sample(self) -> None:
-        """Query the merged map, then each robot's own map, and add a row. The robot maps
-        may be a tick or two newer than the merged one (separate queries)."""
-        bus = self.monitor.bus
-        cloud = fetch_cloud(bus, -1, SAMPLE_TIMEOUT_S)
-        if cloud is not None:
-            self.add(cloud, robot_clouds(bus, cloud, self.monitor.robots, SAMPLE_TIMEOUT_S)[0])
+        """Ask for what changed in the merged map, then in each robot's own map, and add a
+        row. The robot maps may be a tick or two newer than the merged one (separate
+        queries)."""
+        reply = self._fetch(-1)
+        if reply is None:
+            return
+        cloud = self.merged.apply(reply)
+        changes = [self._change(-1, reply)]
+        for robot in range(self.monitor.robots):
+            own = self._fetch(robot)
+            if own is not None and own.robot_id == robot:
+                changes.append(self._change(robot, own))
+            else:  # an older edge: the merged map's points this robot observed first
+                self.versions.pop(robot, None)
+                pts = cloud.points_world[cloud.robot_ids == robot].astype(np.float64)
+                changes.append(MapChange(pts))
+        self._await_edge_tick(cloud.tick)
+        with self._scoring:
+            quality = self.quality.apply(changes[0], changes[1:])
+        if quality is None:
+            log.warning("sample at tick %d: a map could not be updated; whole maps next time",
+                        cloud.tick)
+            self.versions.clear()
+            return
+        self._add_row(cloud, quality)
+
+    def _fetch(self, robot_id: int) -> m.Cloud | None:
+        """The edge's answer for one map since the version held (whole the first time)."""
+        request = m.CloudRequest(robot_id=robot_id,
+                                 since_version=self.versions.get(robot_id, -1))
+        try:
+            reply = self.monitor.bus.query(self.monitor.bus.keys.map_cloud(), request, m.Cloud,
+                                           timeout=SAMPLE_TIMEOUT_S)
+        except (TimeoutError, DecodeError) as exc:
+            log.warning("map/cloud robot_id=%d: no usable reply (%s)", robot_id, exc)
+            return None
+        assert isinstance(reply, m.Cloud)
+        return reply
+
+    def _change(self, robot_id: int, reply: m.Cloud) -> MapChange:
+        """What a sample scores of one reply: keyed (and maybe a delta), or, from an edge
+        that sends no keys, the whole map by coordinates."""
+        pts = reply.points_world.astype(np.float64)
+        if reply.voxel_keys.size != len(pts):
+            self.versions.pop(robot_id, None)
+            return MapChange(pts)
+        self.versions[robot_id] = reply.version
+        return MapChange(pts, keyed_ids(reply.voxel_keys), whole=not reply.delta)
 
     def _await_edge_tick(self, tick: int, timeout_s: float = 2.0) -> None:
         """The edge publishes its grid of tick k before it can answer with Cloud(tick=k), but
@@ -159,13 +238,16 @@ class CoverageSampler:
             pause.wait(0.02)  # the main thread pumps the monitor meanwhile
 
     def add(self, cloud: m.Cloud, robot_points: Sequence[np.ndarray]) -> None:
-        """Add a sample (also used for the final map, with the robot maps the run folder
+        """Add a sample of whole maps (the final map, with the robot maps the run folder
         keeps, so the last row's overlap is metrics.json's); keeps rows in sim-time order."""
         self._await_edge_tick(cloud.tick)
-        grid, frontiers = self.monitor.at_tick(cloud.tick)
         with self._scoring:
-            row = series_row(self.probe, cloud, robot_points, grid, self.tick_s, frontiers,
-                             self.quality)
+            quality = self.quality(cloud.points_world.astype(np.float64), robot_points)
+        self._add_row(cloud, quality)
+
+    def _add_row(self, cloud: m.Cloud, quality: dict[str, float | None]) -> None:
+        grid, frontiers = self.monitor.at_tick(cloud.tick)
+        row = series_row(self.probe, cloud, quality, grid, self.tick_s, frontiers)
         if self.rows and row["sim_time_s"] < self.rows[-1]["sim_time_s"]:
             return
         if self.rows and row["sim_time_s"] == self.rows[-1]["sim_time_s"]:
