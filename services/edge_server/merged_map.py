@@ -125,7 +125,7 @@ class MergedMap:
         self.version = 0  # bumps whenever the merged set changes
         self.cloud_version = 0  # bumps whenever a cloud would differ (keys or points)
         self.rebuilt_at = 0  # cloud_version of the last rebuild (voxels may have gone)
-        self.added_at = np.zeros(0, np.int64)  # per voxel: cloud_version it was added at
+        self.added_at = np.zeros(0, np.int32)  # per voxel: cloud_version it was added at
         # keys the last update inserted; None after a rebuild (voxels may have been removed)
         self.added_keys: np.ndarray | None = np.zeros(0, np.int64)
         self._robot_maps: dict[int, _RobotMap] = {}
@@ -164,7 +164,7 @@ class MergedMap:
         if rebuild:
             self._rebuild(store)
             self.added_keys = None
-            self.added_at = np.full(self.keys.size, v, np.int64)
+            self.added_at = np.full(self.keys.size, v, np.int32)
             self.rebuilt_at = v
         elif deltas:
             self._merge_delta(*(np.concatenate(parts) for parts in zip(*deltas, strict=True)),
@@ -189,7 +189,7 @@ class MergedMap:
                 points = transform_points(
                     sm.T_world_submap, sm.points[: part.n].astype(np.float64)
                 ).astype(np.float32)
-                versions = np.full(part.n, version, np.int64)
+                versions = np.full(part.n, version, np.int32)
                 old, old_versions = part.points_world, part.point_versions
                 if old is not None and old_versions is not None:
                     k = min(old.shape[0], part.n)
@@ -224,7 +224,7 @@ class MergedMap:
         values = [self.colors, self.robot_ids, self.src_uid, self.src_idx, self.added_at]
         self.keys, values, self.added_keys = _insert_new(
             self.keys, values, keys, [colors[idx], robots[idx], uids[idx], src[idx],
-                                      np.full(keys.size, version, np.int64)])
+                                      np.full(keys.size, version, np.int32)])
         self.colors, self.robot_ids, self.src_uid, self.src_idx, self.added_at = values
 
     # -- read ------------------------------------------------------------------------------
@@ -248,7 +248,7 @@ class MergedMap:
         """(N, 3) float32 world mean points of the voxels at (uid, index), or with
         `versions` (N,) the cloud_version each of those points last moved at."""
         if src_uid.size == 0:
-            return np.zeros(0, np.int64) if versions else np.zeros((0, 3), np.float32)
+            return np.zeros(0, np.int32) if versions else np.zeros((0, 3), np.float32)
         by_uid = {p.uid: p for p in self._parts.values()}
         used = np.unique(src_uid)
         offsets = np.zeros(int(used.max()) + 1, np.int64)
@@ -294,7 +294,7 @@ class MergedMap:
         if cached is None or any(k in cached.taken and cached.taken[k][0] != p.pose_version
                                  for k, p in parts.items()):
             cached = _robot_map(parts)  # first time, or a submap moved: from scratch
-            cached.added_at = np.full(cached.keys.size, self.cloud_version, np.int64)
+            cached.added_at = np.full(cached.keys.size, self.cloud_version, np.int32)
             cached.rebuilt_at = self.cloud_version
         else:
             _extend(cached, parts, self.cloud_version)
@@ -352,6 +352,6 @@ def _extend(cached: _RobotMap, parts: dict[SubmapKey, _WorldPart], version: int)
     assert cached.added_at is not None  # set when the map was built
     cached.keys, values, _ = _insert_new(
         cached.keys, [cached.colors, cached.src_uid, cached.src_idx, cached.added_at], keys,
-        [colors[idx], uids[idx], src[idx], np.full(keys.size, version, np.int64)])
+        [colors[idx], uids[idx], src[idx], np.full(keys.size, version, np.int32)])
     cached.colors, cached.src_uid, cached.src_idx, cached.added_at = values
     cached.points = None
