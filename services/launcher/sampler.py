@@ -152,7 +152,7 @@ class CoverageSampler:
         self.merged = CloudMirror()
         self.versions: dict[int, int] = {}  # per map (-1 merged): the edge version held
         self.cpu_s = 0.0  # the sampling thread's own CPU time (profile.json: `sampler_cpu_s`)
-        self._scoring = threading.Lock()  # the final map is added from the main thread
+        self._rows_lock = threading.Lock()  # the final map is added from the main thread
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="coverage-sampler", daemon=True)
 
@@ -195,8 +195,7 @@ class CoverageSampler:
                 pts = cloud.points_world[cloud.robot_ids == robot].astype(np.float64)
                 changes.append(MapChange(pts))
         self._await_edge_tick(cloud.tick)
-        with self._scoring:
-            quality = self.quality.apply(changes[0], changes[1:])
+        quality = self.quality.apply(changes[0], changes[1:])
         if quality is None:
             log.warning("sample at tick %d: a map could not be updated; whole maps next time",
                         cloud.tick)
@@ -239,19 +238,21 @@ class CoverageSampler:
 
     def add(self, cloud: m.Cloud, robot_points: Sequence[np.ndarray]) -> None:
         """Add a sample of whole maps (the final map, with the robot maps the run folder
-        keeps, so the last row's overlap is metrics.json's); keeps rows in sim-time order."""
+        keeps, so the last row's overlap is metrics.json's); keeps rows in sim-time order.
+        Scored from scratch: the tallies know the live maps by key, these by coordinates,
+        and re-adding every point through them costs more than `map_quality`."""
         self._await_edge_tick(cloud.tick)
-        with self._scoring:
-            quality = self.quality(cloud.points_world.astype(np.float64), robot_points)
+        quality = map_quality(self.probe, cloud.points_world.astype(np.float64), robot_points)
         self._add_row(cloud, quality)
 
     def _add_row(self, cloud: m.Cloud, quality: dict[str, float | None]) -> None:
         grid, frontiers = self.monitor.at_tick(cloud.tick)
         row = series_row(self.probe, cloud, quality, grid, self.tick_s, frontiers)
-        if self.rows and row["sim_time_s"] < self.rows[-1]["sim_time_s"]:
-            return
-        if self.rows and row["sim_time_s"] == self.rows[-1]["sim_time_s"]:
-            self.rows.pop()  # the same edge tick answered twice: keep the newer view
-        self.rows.append(row)
-        for sink in self.sinks:
-            sink.on_sample(row, cloud)
+        with self._rows_lock:
+            if self.rows and row["sim_time_s"] < self.rows[-1]["sim_time_s"]:
+                return
+            if self.rows and row["sim_time_s"] == self.rows[-1]["sim_time_s"]:
+                self.rows.pop()  # the same edge tick answered twice: keep the newer view
+            self.rows.append(row)
+            for sink in self.sinks:
+                sink.on_sample(row, cloud)
