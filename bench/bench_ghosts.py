@@ -4,7 +4,9 @@ Loads `<run>/merged_map.ply`, marks ghost points (> 0.10 m from every static sur
 evaluator's rule), clusters them (DBSCAN) and prints each cluster's centre, size, z range,
 which robots' own maps hold it, and which robot's ground-truth trajectory passed through it
 (and when): a cluster where a teammate stood is a DRF leak, a thin shell 0.10-0.15 m off a
-surface is pose error. With `--mission`, first runs the mission itself.
+surface is pose error. Per robot: the ghost voxels of its own map, its pose error and the
+odometry errors its agent had learned by its last report (agent log): the robots whose maps
+hold the ghosts, and why. With `--mission`, first runs the mission itself.
 
     .venv/bin/python bench/bench_ghosts.py /tmp/x
     .venv/bin/python bench/bench_ghosts.py /tmp/x --mission -- --robots 3 --sim-time 120
@@ -14,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -23,10 +26,9 @@ from scipy.spatial import cKDTree
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from services.evaluator.evaluate import RunConfig, probe_for  # noqa: E402
 from services.evaluator.metrics import bounding_volume_pct  # noqa: E402
 from services.evaluator.run_files import read_ply, read_tum  # noqa: E402
-from services.evaluator.world_truth import world_ground_truth  # noqa: E402
-from services.simulator.config import SimConfig  # noqa: E402
 
 log = logging.getLogger("bench_ghosts")
 GHOST_M = 0.10
@@ -40,9 +42,23 @@ def _clusters(points: np.ndarray, eps: float) -> np.ndarray:
     return np.asarray(cloud.cluster_dbscan(eps, 3, False))
 
 
+def learned_odometry(run: Path, robot: int) -> str:
+    """The odometry errors robot's agent last reported learning (its log), or '-'."""
+    log_file = run / "logs" / f"agent{robot}.log"
+    found = re.findall(r"odometry errors OdometryErrors\(scale=(\S+), turn_scale=(\S+), "
+                       r"heading_bias_rad_per_m=(\S+)\) from (\d+) segments",
+                       log_file.read_text() if log_file.exists() else "")
+    if not found:
+        return "-"
+    scale, turn, bias, n = found[-1]
+    return (f"scale {100 * float(scale):+.2f} %, turn {100 * float(turn):+.2f} %, "
+            f"bias {1000 * float(bias):+.2f} mrad/m ({n} segments)")
+
+
 def analyse(run: Path, eps: float = 0.12, top: int = 15) -> dict[str, float]:
     merged = read_ply(run / "merged_map.ply")
-    surface = world_ground_truth(SimConfig()).surface_points_world
+    probe = probe_for(RunConfig.read(run / "config.yaml").sim)  # the run's own world
+    surface = probe.gt.surface_points_world
     dist, _ = cKDTree(surface).query(merged)
     ghost = dist > GHOST_M
     bv = bounding_volume_pct(merged, surface)
@@ -54,15 +70,18 @@ def analyse(run: Path, eps: float = 0.12, top: int = 15) -> dict[str, float]:
     for n in range(64):
         if not (run / f"robot_{n}_map.ply").exists():
             break
-        robot_maps[n] = cKDTree(read_ply(run / f"robot_{n}_map.ply"))
+        own = read_ply(run / f"robot_{n}_map.ply")
+        robot_maps[n] = cKDTree(own)
+        _, n_ghost, n_voxels = probe.ghost_point_mask(own, probe.surface_distance(own))
         t, xyyaw = read_tum(run / f"trajectory_{n}_gt.tum")
         trajs[n] = (t, xyyaw)
         te, est = read_tum(run / f"trajectory_{n}_est.tum")
         k = np.searchsorted(te, t).clip(0, len(te) - 1)
         err = np.hypot(*(est[k, :2] - xyyaw[:, :2]).T)
         yaw = np.abs(np.angle(np.exp(1j * (est[k, 2] - xyyaw[:, 2]))))
-        print(f"  robot {n}: pose error final {err[-1]:.3f} m, max {err.max():.3f} m, "
-              f"mean {err.mean():.3f} m; yaw max {np.degrees(yaw.max()):.1f} deg")
+        print(f"  robot {n}: own map {n_ghost} ghost voxels of {n_voxels}; pose error final "
+              f"{err[-1]:.3f} m, max {err.max():.3f} m, mean {err.mean():.3f} m; yaw max "
+              f"{np.degrees(yaw.max()):.1f} deg; learned {learned_odometry(run, n)}")
     gp = merged[ghost]
     if gp.shape[0] == 0:
         return {"bv_pct": bv, "ghost_points": 0}
