@@ -125,6 +125,12 @@ class RobotPose(Message):
         description="the walls' direction this agent learned from its first frames, world "
         "frame, modulo 90° in [−π/4, π/4]; None until it has learned one (teammates take the "
         "consensus: services/robot_agent/wall_heading.py)")
+    odometry_stats: list[Annotated[float, Field(allow_inf_nan=False)]] | None = Field(
+        default=None, min_length=7, max_length=7,
+        description="this agent's own odometry-calibration normal equations (scale numerator "
+        "and denominator, turn normal matrix xx, xy, yy, right-hand side; "
+        "services/robot_agent/odometry_calibration.py), for teammates that pool them; None "
+        "when not shared")
 
 
 class Submap(Message):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from schemas import decode, encode
 from schemas.messages import CmdVel, Correction, Goal, Odometry, Pose2D, RgbdFrame, Submap
@@ -151,3 +152,21 @@ def test_an_idle_robot_holds_still_while_teammates_hide_its_view() -> None:
         core.on_rgbd(_frame(4, (0.0, 0.0, 0.0)))
         cmd = core.on_odometry(_odom(4, (0.0, 0.0, 0.0)))[-1].message
         assert not core.view_hidden and cmd.omega_radps != 0.0
+
+
+def test_the_fleet_pools_odometry_calibration_through_pose_messages() -> None:
+    """With fleet_weight > 0 an agent's poses carry its calibration sums and a teammate's
+    sums move its estimate; by default neither happens (the messages are as before)."""
+    from schemas.messages import RobotPose
+
+    sums = [1.0e6 * 0.02, 1.0e6, 100.0, 0.0, 100.0, 1.0, 0.5]  # 2 % scale, well measured
+    teammate = RobotPose(robot_id=1, tick=1, stamp_ns=10**8, pose_world=Pose2D(x=1, y=0, yaw=0),
+                         odometry_stats=sums)
+    for weight in (0.0, 1.0):
+        core = AgentCore(AgentConfig(odom_calibration_fleet_weight=weight), 0, 0.1)
+        _, outs = _run(core, 3)
+        pose = next(o.message for o in outs[-1] if o.topic == "pose")
+        assert (pose.odometry_stats is None) == (weight == 0.0)
+        core.on_pose(decode(encode(teammate), RobotPose))
+        scale = core.localizer.odometry.calibration.errors.scale
+        assert scale == (pytest.approx(0.02, abs=0.002) if weight else 0.0)

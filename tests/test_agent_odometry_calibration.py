@@ -142,3 +142,77 @@ def test_the_localizer_learns_the_scale_of_wheels_that_over_read() -> None:
     # one more metre on the wheels alone: the guess follows the truth, not the wheels
     guess = xyyaw_from_T(loc.guess(T_from_xyyaw(*(raw + np.array([1.05, 0.0, 0.0])))))
     assert abs(guess[0] - (true[0] + 1.0)) < 0.02
+
+
+def _segments(seed: int, n: int) -> list:
+    """Segments of a wheel with the simulator's errors, registrations 1 cm / 0.2° noisy."""
+    from services.robot_agent.odometry_calibration import segment_between
+
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        d, turn = rng.uniform(0.5, 2.0), rng.uniform(-1.0, 1.0)
+        reg_to = np.array([d * math.cos(turn / 2), d * math.sin(turn / 2), turn])
+        odom_turn = turn * 1.01 + 0.005 * d
+        odom_to = np.array([1.02 * reg_to[0], 1.02 * reg_to[1], odom_turn])
+        noisy = reg_to + rng.normal(0, [0.01, 0.01, 0.0035])
+        out.append(segment_between(np.zeros(3), odom_to, np.zeros(3), noisy, odom_turn,
+                                   1.02 * d, 1.02 * d, abs(odom_turn)))
+    return out
+
+
+def test_a_fleet_pool_counts_teammates_segments_as_its_own() -> None:
+    """With fleet_weight 1, a robot with few segments of its own and its teammates' sums fits
+    as one robot that had every segment; with 0 it keeps its own estimate; a robot with none
+    of its own drives on the fleet's."""
+    from services.robot_agent.odometry_calibration import Calibration
+
+    params = CalibrationParams(fleet_weight=1.0, min_segments_for_outliers=10**6)
+    mine, theirs, everything = Calibration(params), Calibration(params), Calibration(params)
+    own, other = _segments(1, 2), _segments(2, 30)
+    for seg in own:
+        mine.add(seg)
+        everything.add(seg)
+    for seg in other:
+        theirs.add(seg)
+        everything.add(seg)
+    alone = mine.errors
+    mine.set_fleet(theirs.own_stats())
+    for got, want in ((mine.errors.scale, everything.errors.scale),
+                      (mine.errors.turn_scale, everything.errors.turn_scale),
+                      (mine.errors.heading_bias_rad_per_m,
+                       everything.errors.heading_bias_rad_per_m)):
+        assert got == pytest.approx(want, rel=1e-9, abs=1e-12)
+    assert abs(mine.errors.scale - 0.02) < abs(alone.scale - 0.02)
+    assert mine.own_stats() == pytest.approx(Calibration(params).own_stats() + sum(
+        _stats_of(params, s) for s in own))
+    solo = Calibration(CalibrationParams(fleet_weight=0.0))
+    for seg in own:
+        solo.add(seg)
+    before = solo.errors
+    solo.set_fleet(theirs.own_stats())
+    assert solo.errors == before
+    newcomer = Calibration(params)
+    newcomer.set_fleet(theirs.own_stats())
+    assert newcomer.errors.scale == pytest.approx(0.02, abs=0.004)
+
+
+def _stats_of(params: CalibrationParams, seg: object) -> np.ndarray:
+    from services.robot_agent.odometry_calibration import Calibration
+
+    one = Calibration(params)
+    one.add(seg)  # type: ignore[arg-type]
+    return one.own_stats()
+
+
+def test_pose_messages_carry_seven_finite_calibration_sums() -> None:
+    from schemas import decode, encode
+    from schemas.messages import Pose2D, RobotPose
+
+    pose = RobotPose(robot_id=1, tick=3, stamp_ns=300, pose_world=Pose2D(x=0, y=0, yaw=0),
+                     odometry_stats=[1.0, 2.0, 3.0, 0.5, 4.0, 0.1, -0.2])
+    assert decode(encode(pose), RobotPose).odometry_stats == pose.odometry_stats
+    for bad in ([1.0] * 6, [1.0] * 6 + [float("nan")]):
+        with pytest.raises(ValueError):
+            RobotPose(robot_id=1, tick=3, stamp_ns=300, pose_world=Pose2D(x=0, y=0, yaw=0),
+                      odometry_stats=bad)

@@ -173,6 +173,10 @@ class AgentConfig(BaseModel):
     odom_calibration_prior_segments: float = Field(
         default=2.0, ge=0, description="the calibration's prior at 'no error' weighs this many "
         "1 m segments (fewer: learned sooner, trusting the first segments more)")
+    odom_calibration_fleet_weight: float = Field(
+        default=0.0, ge=0, le=1, description="teammates' calibration segments (sent with their "
+        "poses) count this much each in this agent's fit: 1 pools the fleet's (robots of one "
+        "model, the same wheel errors), 0 each its own (docs/agent.md, 'The fleet's wheels')")
     odom_calibration_max_weak_ratio: float = Field(
         default=10.0, ge=1, description="a registration ends a calibration segment only when "
         "its weakest translation direction is at most this many times weaker (variance) than "

@@ -16,6 +16,13 @@ parameters for mobile robots", T-RO 2013, without the sensor part); the agent in
 corrected increments. Segments the current model explains badly (a registration that slid)
 are left out.
 
+Robots of one model share much of their wheels' error: with `fleet_weight` > 0 an agent adds
+its teammates' own segments (their normal equations, `own_stats`, sent with their poses)
+weighed by it, so a robot that has not yet closed a segment of its own (along an aisle,
+registrations are too weak to end one) drives on the fleet's estimate instead of raw
+odometry. 1 pools them fully (the same wheels); each agent's sums hold its own segments only,
+so no evidence is counted twice.
+
 Pure: numpy in, numpy out; the state is a small accumulator.
 """
 
@@ -48,6 +55,7 @@ class CalibrationParams:
     # weakest translation direction at most this many times weaker than its strongest
     min_inlier_frac: float = 0.7
     max_weak_ratio: float = 10.0
+    fleet_weight: float = 0.0  # teammates' segments count this much each (0: own only)
 
 
 @dataclass(frozen=True)
@@ -58,6 +66,7 @@ class OdometryErrors:
 
 
 NO_ERRORS = OdometryErrors()
+STATS = 7  # the numbers of `Calibration.own_stats`
 
 
 def is_good_registration(inlier_frac: float, R: np.ndarray, params: CalibrationParams) -> bool:
@@ -106,6 +115,19 @@ class Calibration:
     _scale_den: float = 0.0
     _turn_normal: np.ndarray = field(default_factory=lambda: np.zeros((2, 2)))
     _turn_rhs: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    _fleet: np.ndarray = field(default_factory=lambda: np.zeros(STATS))  # teammates' sums
+
+    def own_stats(self) -> np.ndarray:
+        """(7,) this robot's own normal equations: scale numerator and denominator, turn
+        normal matrix (xx, xy, yy) and right-hand side; what teammates pool."""
+        n, r = self._turn_normal, self._turn_rhs
+        return np.array([self._scale_num, self._scale_den, n[0, 0], n[0, 1], n[1, 1],
+                         r[0], r[1]])
+
+    def set_fleet(self, teammates_stats: np.ndarray) -> None:
+        """The sum of the teammates' `own_stats`; weighed by `fleet_weight` in the fit."""
+        self._fleet = np.asarray(teammates_stats, float).reshape(STATS).copy()
+        self.errors = self._solve()
 
     def add(self, seg: Segment) -> bool:
         """Fit the segment in, unless the current model says it is an outlier."""
@@ -136,8 +158,10 @@ class Calibration:
         # the prior: as many unit segments (1 m, 1 rad) of "no error" at the nominal noise
         w_t = p.prior_segments / (2 * p.reg_sigma_m**2 + p.walk_m2_per_m)
         w_r = p.prior_segments / (2 * p.reg_sigma_rad**2 + p.walk_rad2_per_rad)
-        scale = self._scale_num / (self._scale_den + w_t)
-        turn_scale, bias = np.linalg.solve(self._turn_normal + np.eye(2) * w_r, self._turn_rhs)
+        f = p.fleet_weight * self._fleet
+        scale = (self._scale_num + f[0]) / (self._scale_den + f[1] + w_t)
+        normal = self._turn_normal + np.array([[f[2], f[3]], [f[3], f[4]]])
+        turn_scale, bias = np.linalg.solve(normal + np.eye(2) * w_r, self._turn_rhs + f[5:7])
         return OdometryErrors(
             scale=float(np.clip(scale, -p.max_abs_scale, p.max_abs_scale)),
             turn_scale=float(np.clip(turn_scale, -p.max_abs_scale, p.max_abs_scale)),

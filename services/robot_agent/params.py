@@ -38,7 +38,8 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
         if cfg.reg_fusion == "filter" else None,
         calibration=CalibrationParams(segment_m=cfg.odom_calibration_segment_m,
                                       max_weak_ratio=cfg.odom_calibration_max_weak_ratio,
-                                      prior_segments=cfg.odom_calibration_prior_segments)
+                                      prior_segments=cfg.odom_calibration_prior_segments,
+                                      fleet_weight=cfg.odom_calibration_fleet_weight)
         if cfg.odom_calibration else None,
         scan_odometry=ScanOdometryParams(sigma_rad=cfg.reg_scan_sigma_rad)
         if cfg.reg_scan_heading else None,
