@@ -116,6 +116,9 @@ class AgentConfig(BaseModel):
         default=100, ge=10, description="with reg_wall_heading: wall points a frame needs")
     reg_wall_sigma_rad: float = Field(
         default=0.0035, gt=0, description="with reg_wall_heading: σ of a frame's heading, rad")
+    reg_wall_learn_frames: int = Field(
+        default=20, ge=1, description="with reg_wall_heading: the world's wall direction is "
+        "learned from this many early frames with walls; teammates get it once learned")
     reg_wall_learn_max_sigma_rad: float = Field(
         default=0.017453292519943295, gt=0, description="with reg_wall_heading: the world's "
         "wall direction is learned only from early frames whose filter yaw σ is at most this, "

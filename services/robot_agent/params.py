@@ -46,6 +46,7 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
         wall_heading=WallHeadingParams(min_points=cfg.reg_wall_min_points,
                                        sigma_rad=cfg.reg_wall_sigma_rad,
                                        learn_max_sigma_rad=cfg.reg_wall_learn_max_sigma_rad,
+                                       learn_frames=cfg.reg_wall_learn_frames,
                                        team_inlier_rad=cfg.reg_wall_team_inlier_rad or None,
                                        reacquire_frames=cfg.reg_wall_reacquire_frames or None)
         if cfg.reg_wall_heading else None,
