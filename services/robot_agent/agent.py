@@ -117,7 +117,6 @@ class AgentCore:
         self.nav = Navigator(config, tick_s)
         self.teammates: dict[int, RobotPose] = {}
         self.teammates_prev: dict[int, RobotPose] = {}  # the one before, for the velocity
-        self.fleet_odometry: dict[int, np.ndarray] = {}  # teammates' calibration sums
         self.yields = YieldRule(config, robot_id)
         self.frames_skipped = 0  # frames dropped while waiting for the team's poses
         self.drf = drf_params(config)
@@ -156,30 +155,12 @@ class AgentCore:
         if self.localizer.walls is not None:
             self.localizer.walls.receive(pose.robot_id, pose.wall_direction_rad,
                                          xyyaw_from_T(self.T_world_loc)[2])
-        self._pool_odometry(pose)
+        if self.localizer.odometry is not None:
+            self.localizer.odometry.calibration.receive(pose.robot_id, pose.odometry_stats)
         last = self.teammates.get(pose.robot_id)
         if last is not None and last.tick < pose.tick:
             self.teammates_prev[pose.robot_id] = last
         self.teammates[pose.robot_id] = pose
-
-    def _pool_odometry(self, pose: RobotPose) -> None:
-        """A teammate's calibration sums join this agent's fit (fleet_weight > 0)."""
-        odometry = self.localizer.odometry
-        if pose.odometry_stats is None or odometry is None:
-            return
-        stats = np.asarray(pose.odometry_stats, float)
-        last = self.fleet_odometry.get(pose.robot_id)
-        if last is not None and np.array_equal(last, stats):
-            return
-        self.fleet_odometry[pose.robot_id] = stats
-        odometry.calibration.set_fleet(np.sum(list(self.fleet_odometry.values()), axis=0))
-
-    def _odometry_stats(self) -> list[float] | None:
-        """This agent's own calibration sums, when the fleet pools them."""
-        odometry = self.localizer.odometry
-        if odometry is None or odometry.calibration.params.fleet_weight <= 0:
-            return None
-        return [float(v) for v in odometry.calibration.own_stats()]
 
     def team_ready(self, tick: int) -> bool:
         """Every teammate's pose is known (so the DRF can remove it), or the bounded wait
@@ -408,7 +389,8 @@ class AgentCore:
                 x=pose_world[0], y=pose_world[1], yaw=pose_world[2]), state=self.nav.state,
             wall_direction_rad=walls.shared(xyyaw_from_T(self.T_world_loc)[2])
             if (walls := self.localizer.walls) is not None else None,
-            odometry_stats=self._odometry_stats(),
+            odometry_stats=odometry.calibration.shared()
+            if (odometry := self.localizer.odometry) is not None else None,
         ))]
         for delta in deltas:
             out.append(Outgoing("submap", self._submap_message(delta, tick, odom.stamp_ns)))

@@ -116,6 +116,7 @@ class Calibration:
     _turn_normal: np.ndarray = field(default_factory=lambda: np.zeros((2, 2)))
     _turn_rhs: np.ndarray = field(default_factory=lambda: np.zeros(2))
     _fleet: np.ndarray = field(default_factory=lambda: np.zeros(STATS))  # teammates' sums
+    _teammates: dict[int, np.ndarray] = field(default_factory=dict)  # their latest sums
 
     def own_stats(self) -> np.ndarray:
         """(7,) this robot's own normal equations: scale numerator and denominator, turn
@@ -128,6 +129,23 @@ class Calibration:
         """The sum of the teammates' `own_stats`; weighed by `fleet_weight` in the fit."""
         self._fleet = np.asarray(teammates_stats, float).reshape(STATS).copy()
         self.errors = self._solve()
+
+    def receive(self, robot_id: int, stats: list[float] | None) -> None:
+        """A teammate's latest `own_stats` (from its pose); the fit is redone when they
+        changed. Kept per teammate: each sends its running sums, not increments."""
+        if stats is None:
+            return
+        new = np.asarray(stats, float)
+        last = self._teammates.get(robot_id)
+        if last is not None and np.array_equal(last, new):
+            return
+        self._teammates[robot_id] = new
+        # summed in robot order, not arrival order: the same seed gives the same fit
+        self.set_fleet(np.sum([self._teammates[r] for r in sorted(self._teammates)], axis=0))
+
+    def shared(self) -> list[float] | None:
+        """`own_stats` for this robot's pose when the fleet pools them, else None."""
+        return [float(v) for v in self.own_stats()] if self.params.fleet_weight > 0 else None
 
     def add(self, seg: Segment) -> bool:
         """Fit the segment in, unless the current model says it is an outlier."""
