@@ -3,6 +3,7 @@
 import numpy as np
 
 from services.common.arrays import (
+    in_sorted,
     union_rows_2,
     unique_first,
     unique_groups,
@@ -24,6 +25,9 @@ def test_unique_helpers_match_numpy() -> None:
     assert np.array_equal(unique_rows_2(rc), np.unique(rc, axis=0))
     assert unique_sorted(np.zeros(0, np.int64)).size == 0
     assert unique_rows_2(np.zeros((0, 2), np.int64)).shape == (0, 2)
+    members = unique_sorted(k[::3])
+    assert np.array_equal(in_sorted(k, members), np.isin(k, members))
+    assert not in_sorted(k, np.zeros(0, np.int64)).any()
 
 
 def test_union_rows_2_equals_a_unique_of_both() -> None:

@@ -11,9 +11,10 @@ from services.common.grid import GridSpec
 from services.evaluator.config import EvalConfig
 from services.evaluator.free_space import FreeGrid
 from services.evaluator.ground_truth import GroundTruth
-from services.evaluator.incremental import LiveQuality, MapTally, TruthIndex
+from services.evaluator.incremental import LiveQuality, MapTally
 from services.evaluator.metrics import covered_mask
 from services.evaluator.scoring import Probe, map_quality
+from services.evaluator.truth_cells import TruthIndex
 
 VOXEL_M = 0.05
 SERIES_KEYS = ("coverage_3d_pct", "overlap_3d_pct", "bounding_volume_pct", "ghost_volume_m3")

@@ -19,6 +19,15 @@ def unique_sorted(keys: np.ndarray) -> np.ndarray:
     return s[keep]
 
 
+def in_sorted(keys: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:
+    """(N,) bool: each key is in `sorted_set` (sorted, unique) (= np.isin, by binary search)."""
+    keys = np.asarray(keys)
+    if sorted_set.size == 0:
+        return np.zeros(keys.shape, bool)
+    at = np.minimum(np.searchsorted(sorted_set, keys), sorted_set.size - 1)
+    return sorted_set[at] == keys
+
+
 def unique_groups(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Sorted unique values, the index of each one's first occurrence, the inverse (N,) and
     the counts (= np.unique(keys, return_index=True, return_inverse=True,

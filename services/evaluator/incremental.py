@@ -6,11 +6,12 @@ point) cost the launcher 58 of its 69 CPU-seconds in a 135 s house mission on tw
 (docs/benchmarks.md, issue 13); a sample now costs what changed since the last one.
 
 The figures equal `scoring.map_quality`'s on the same points exactly, not approximately:
-- coverage is `metrics.covered_mask` itself, asked only about the truth around what changed:
-  truth within the radius of a point lies in that point's cell of a grid a bit coarser than
-  the radius, or in one of the 26 around it. New counting points are asked about the
-  uncovered truth around them; covered truth around points that went is asked again of the
-  counting points left around it. (A count of covering points per truth point would make
+- coverage is `metrics.covered_mask`'s query, asked only about the truth around what changed
+  (`truth_cells.TruthIndex`). New counting points are asked about the uncovered truth around
+  them: a truth point with one of them in its own cell of side radius/2 is covered unasked
+  (they lie within 0.87·radius). Each covered truth point keeps one covering point as its
+  witness; only truth whose witness went, moved or stopped counting is asked again, of the
+  counting points around it. (A count of covering points per truth point would make
   removals a subtraction, but listing every (point, truth) pair within the radius cost more
   than scoring from scratch: ~30 pairs a point.)
 - a ghost is a per-voxel verdict (`Probe.ghost_point_mask`): a voxel of `voxel_m` is a ghost
@@ -31,54 +32,15 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from services.common import voxels
+from services.common.arrays import in_sorted, unique_sorted
 from services.evaluator import metrics as mx
 from services.evaluator.scoring import Probe, map_quality
+from services.evaluator.truth_cells import TruthIndex
 
 GhostTest = Callable[[np.ndarray], np.ndarray]
-
-
-def _neighbour_offsets() -> np.ndarray:
-    """Packed-key offsets of a cell's 3×3×3 neighbourhood (fields do not overflow: indices
-    stay far inside ±2^20)."""
-    d = np.array([-1, 0, 1], np.int64)
-    dx, dy, dz = np.meshgrid(d, d, d, indexing="ij")
-    return ((dx << 42) + (dy << 21) + dz).ravel()
-
-
-NEIGHBOURS = _neighbour_offsets()
-
-
-class TruthIndex:
-    """The observable truth points bucketed in cells a bit larger than the coverage radius:
-    every truth point within the radius of a point lies in that point's cell or one of its 26
-    neighbours, so a change only looks at the truth around it."""
-
-    def __init__(self, points: np.ndarray, radius_m: float) -> None:
-        self.points, self.radius_m = points, radius_m
-        self.cell_m = 1.25 * radius_m  # the margin keeps float rounding off the bound
-        cells = self.cells_of(points)
-        self.order = np.argsort(cells, kind="stable")
-        self.sorted_cells = cells[self.order]
-
-    def __len__(self) -> int:
-        return len(self.points)
-
-    def cells_of(self, pts: np.ndarray) -> np.ndarray:
-        return voxels.pack(voxels.voxel_indices(pts, self.cell_m))
-
-    def around(self, pts: np.ndarray) -> np.ndarray:
-        """Indices of the truth points in the cells around `pts` (a superset of those
-        within the radius of one of them)."""
-        if len(pts) == 0:
-            return np.zeros(0, np.int64)
-        cells = np.unique(self.cells_of(pts))
-        near = np.unique((cells[:, None] + NEIGHBOURS[None, :]).ravel())
-        lo = np.searchsorted(self.sorted_cells, near, side="left")
-        lens = np.searchsorted(self.sorted_cells, near, side="right") - lo
-        idx = np.repeat(lo - np.cumsum(lens) + lens, lens) + np.arange(lens.sum())
-        return self.order[idx]
 
 
 def _mix(x: np.ndarray) -> np.ndarray:
@@ -100,14 +62,6 @@ def keyed_ids(keys: np.ndarray) -> np.ndarray:
     """(N,) uint64 ids of points known by an int64 key (the edge's world voxel keys, one
     point per key), in the keys' order: a sorted key array stays sorted."""
     return np.asarray(keys, np.int64).view(np.uint64) ^ np.uint64(1 << 63)
-
-
-def _member(keys: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:
-    """(N,) bool: each key is in `sorted_set` (sorted, unique)."""
-    if sorted_set.size == 0:
-        return np.zeros(keys.size, bool)
-    i = np.minimum(np.searchsorted(sorted_set, keys), sorted_set.size - 1)
-    return sorted_set[i] == keys
 
 
 class MapTally:
@@ -132,6 +86,7 @@ class MapTally:
         self.voxel = np.zeros(0, np.int64)  # per point: its voxel's key
         self.cell = np.zeros(0, np.int64)  # per point: its truth cell (TruthIndex.cells_of)
         self.covered = np.zeros(len(truth), bool)
+        self.witness = np.zeros(len(truth), np.uint64)  # per covered truth point: a coverer
         self.vkeys = np.zeros(0, np.int64)  # sorted keys of the occupied voxels
         self.vpoints = np.zeros(0, np.int64)  # per voxel: points held
         self.vnear = np.zeros(0, np.int64)  # per voxel: points that pass the ghost test
@@ -150,7 +105,7 @@ class MapTally:
             self._apply(np.ones(self.ids.size, bool), ids, pts)
         else:
             same, removed = self._match(ids, pts, whole=True)
-            if np.any(_member(ids[~same], self.ids[~removed])):  # a hash shared: refuse
+            if np.any(in_sorted(ids[~same], self.ids[~removed])):  # a hash shared: refuse
                 return False
             self._apply(removed, ids[~same], pts[~same])
         self.keyed = False
@@ -193,27 +148,33 @@ class MapTally:
         """Take back the `removed` held points and score the new ones (sorted ids, none a
         kept point's)."""
         keep = ~removed
+        kept_of = (lambda a: a[keep]) if removed.any() else (lambda a: a)  # no copy if none
         add_near = self.near_of(add_pts)
         add_voxel = voxels.pack(voxels.voxel_indices(add_pts, self.voxel_m))
         flipped = self._recount(self.voxel[removed], self.near[removed], add_voxel, add_near)
-        was = self.counting[keep]
+        was = kept_of(self.counting)
         kept = was.copy()  # a held point's verdict changes only with its voxel's
-        kept_voxel = self.voxel[keep]
-        hit = _member(kept_voxel, flipped)
-        kept[hit] = self._cleared(kept_voxel[hit])
+        kept_voxel = kept_of(self.voxel)
+        if flipped.size:
+            hit = in_sorted(kept_voxel, flipped)
+            kept[hit] = self._cleared(kept_voxel[hit])
         add_counting = self._cleared(add_voxel)
-        kept_points = self.points[keep]
-        lost = np.concatenate([self.points[removed & self.counting], kept_points[was & ~kept]])
-        gained = np.concatenate([add_pts[add_counting], kept_points[kept & ~was]])
-        at = np.searchsorted(self.ids[keep], add_ids)
-        self.ids = np.insert(self.ids[keep], at, add_ids)
+        kept_points, kept_ids = kept_of(self.points), kept_of(self.ids)
+        lost = removed & self.counting
+        lost_pts = np.concatenate([self.points[lost], kept_points[was & ~kept]])
+        lost_ids = np.concatenate([self.ids[lost], kept_ids[was & ~kept]])
+        gained = kept & ~was
+        gained_pts = np.concatenate([add_pts[add_counting], kept_points[gained]])
+        gained_ids = np.concatenate([add_ids[add_counting], kept_ids[gained]])
+        at = np.searchsorted(kept_ids, add_ids)
+        self.ids = np.insert(kept_ids, at, add_ids)
         self.points = np.insert(kept_points, at, add_pts, axis=0)
-        self.near = np.insert(self.near[keep], at, add_near)
+        self.near = np.insert(kept_of(self.near), at, add_near)
         self.counting = np.insert(kept, at, add_counting)
         self.voxel = np.insert(kept_voxel, at, add_voxel)
-        self.cell = np.insert(self.cell[keep], at, self.truth.cells_of(add_pts))
-        self._cover(gained)
-        self._uncover(lost, gained)
+        self.cell = np.insert(kept_of(self.cell), at, self.truth.cells_of(add_pts))
+        self._uncover(lost_pts, lost_ids)
+        self._cover(gained_pts, gained_ids)
 
     def near_of(self, new_pts: np.ndarray) -> np.ndarray:
         """Which new points pass the ghost test on their own (all, without one)."""
@@ -224,9 +185,11 @@ class MapTally:
     def _recount(self, gone_voxel: np.ndarray, gone_near: np.ndarray,
                  add_voxel: np.ndarray, add_near: np.ndarray) -> np.ndarray:
         """Move the per-voxel counts by the points that went and came; the sorted keys of
-        the voxels whose verdict (holds a point that passes the ghost test) changed."""
-        touched = np.unique(np.concatenate([gone_voxel, add_voxel]))
-        new = touched[~_member(touched, self.vkeys)]
+        the voxels held before whose verdict (holds a point that passes the ghost test)
+        changed: the voxels of the points kept."""
+        touched = unique_sorted(np.concatenate([gone_voxel, add_voxel]))
+        old = in_sorted(touched, self.vkeys)
+        new = touched[~old]
         if new.size:
             at = np.searchsorted(self.vkeys, new)
             self.vkeys = np.insert(self.vkeys, at, new)
@@ -238,7 +201,7 @@ class MapTally:
             i = np.searchsorted(self.vkeys, keys)
             np.add.at(self.vpoints, i, sign)
             np.add.at(self.vnear, i[near], sign)
-        flipped = touched[before != (self.vnear[where] > 0)]
+        flipped = touched[old & (before != (self.vnear[where] > 0))]
         if np.any(self.vpoints[where] == 0):
             alive = self.vpoints > 0
             self.vkeys, self.vpoints, self.vnear = (
@@ -253,30 +216,48 @@ class MapTally:
             return np.ones(voxel.size, bool)
         return self.vnear[np.searchsorted(self.vkeys, voxel)] > 0
 
-    def _cover(self, new: np.ndarray) -> None:
-        """Truth the new counting points cover (only uncovered truth around them is asked)."""
-        cand = self.truth.around(new)
+    def _cover(self, new_pts: np.ndarray, new_ids: np.ndarray) -> None:
+        """Truth the new counting points cover (only uncovered truth around them is asked),
+        each with the nearest of them as its witness."""
+        cand = self.truth.around(new_pts)
         cand = cand[~self.covered[cand]]
-        r = self.truth.radius_m
-        self.covered[cand] = mx.covered_mask(new, self.truth.points[cand], r)
-
-    def _uncover(self, gone: np.ndarray, gained: np.ndarray) -> None:
-        """Covered truth around points that went is asked again of the counting points left
-        around it (those within the radius of it lie in the cells around it); first of the
-        points that came, which hold most of it where points moved inside their voxels."""
-        cand = self.truth.around(gone)
-        cand = cand[self.covered[cand]]
-        r = self.truth.radius_m
-        if cand.size:  # only truth within the radius of a point that went can lose its cover
-            cand = cand[mx.covered_mask(gone, self.truth.points[cand], r)]
-        if cand.size and len(gained):
-            cand = cand[~mx.covered_mask(gained, self.truth.points[cand], r)]
         if cand.size == 0:
             return
-        truth = self.truth.points[cand]
-        cells = np.unique((np.unique(self.truth.cells_of(truth))[:, None] + NEIGHBOURS).ravel())
-        local = self.points[_member(self.cell, cells) & self.counting]
-        self.covered[cand] = mx.covered_mask(local, truth, self.truth.radius_m)
+        keys = self.truth.fine_cells_of(new_pts)  # first: a new point in the same fine cell
+        order = np.argsort(keys, kind="stable")
+        keys = keys[order]
+        at = np.minimum(np.searchsorted(keys, self.truth.fine[cand]), keys.size - 1)
+        same = keys[at] == self.truth.fine[cand]
+        self.covered[cand[same]] = True
+        self.witness[cand[same]] = new_ids[order[at[same]]]
+        self._ask(cand[~same], new_pts, new_ids)
+
+    def _uncover(self, gone_pts: np.ndarray, gone_ids: np.ndarray) -> None:
+        """Covered truth whose witness went (or moved) is asked again of the counting points
+        around it: any other truth keeps a counting point within the radius, its witness."""
+        if gone_ids.size == 0:
+            return
+        cand = self.truth.around(gone_pts)  # a witness lies within the radius of its truth
+        cand = cand[self.covered[cand]]
+        cand = cand[in_sorted(self.witness[cand], unique_sorted(gone_ids))]
+        if cand.size == 0:
+            return
+        local = self.truth.near_cells(self.cell, cand) & self.counting
+        self._ask(cand, self.points[local], self.ids[local])
+
+    def _ask(self, cand: np.ndarray, pts: np.ndarray, ids: np.ndarray) -> None:
+        """Set the truth points `cand` covered or not by `pts` (`metrics.covered_mask`'s
+        query), the nearest as the witness of those covered."""
+        if cand.size == 0:
+            return
+        if len(pts) == 0:
+            self.covered[cand] = False
+            return
+        dist, nearest = cKDTree(pts).query(self.truth.points[cand],
+                                           distance_upper_bound=self.truth.radius_m)
+        hit = np.isfinite(dist)
+        self.covered[cand] = hit
+        self.witness[cand[hit]] = ids[nearest[hit]]
 
 
 @dataclass(frozen=True)
@@ -300,10 +281,11 @@ class LiveQuality:
         self.truth = TruthIndex(probe.gt.observable_points_world, ev.coverage_radius_m)
         self.merged = MapTally(self.truth, ev.voxel_m, self._is_ghost)
         self.robots: list[MapTally] = []
+        probe.surface_tree, probe.surface_cells  # noqa: B018  built now, not in the first sample
 
     def _is_ghost(self, pts: np.ndarray) -> np.ndarray:
         # `Probe.ghost_point_mask`'s test, for one point per voxel
-        return ~(self.probe.surface_distance(pts) <= self.probe.ev.ghost_dist_m)
+        return ~self.probe.near_surface(pts)
 
     def __call__(
         self, points_world: np.ndarray, robot_points: Sequence[np.ndarray] | None

@@ -16,6 +16,7 @@ from scipy.spatial import cKDTree
 
 from schemas import messages as m
 from services.common import voxels
+from services.common.arrays import in_sorted, unique_sorted
 from services.common.grid import GridSpec
 from services.evaluator import metrics as mx
 from services.evaluator.config import EvalConfig
@@ -38,6 +39,7 @@ class Probe:
     ev: EvalConfig
     _surface_tree: cKDTree | None = field(default=None, repr=False)
     _observable_tree: cKDTree | None = field(default=None, repr=False)
+    _surface_cells: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def surface_tree(self) -> cKDTree:
@@ -58,6 +60,28 @@ class Probe:
             return np.zeros(0)
         dist, _ = self.surface_tree.query(points_world)
         return dist
+
+    def near_surface(self, points_world: np.ndarray) -> np.ndarray:
+        """(N,) bool: `surface_distance(points) <= ghost_dist_m`, exactly, with a search
+        cut short past that distance (the tree keeps neighbours strictly nearer than its
+        bound, so the bound sits a hair above the threshold)."""
+        limit = self.ev.ghost_dist_m
+        near = in_sorted(voxels.pack(voxels.voxel_indices(points_world, limit / 2)),
+                         self.surface_cells)
+        if not near.all():
+            dist, _ = self.surface_tree.query(points_world[~near],
+                                              distance_upper_bound=limit * (1 + 1e-9))
+            near[~near] = dist <= limit
+        return near
+
+    @property
+    def surface_cells(self) -> np.ndarray:
+        """Sorted keys of the cells of side ghost_dist/2 that hold a surface sample: every
+        point of one lies within 0.87·ghost_dist of it, so passes the ghost test unasked."""
+        if self._surface_cells is None:
+            self._surface_cells = unique_sorted(voxels.pack(voxels.voxel_indices(
+                self.gt.surface_points_world, self.ev.ghost_dist_m / 2)))
+        return self._surface_cells
 
     def ghost_point_mask(
         self, points_world: np.ndarray, dist: np.ndarray
