@@ -37,6 +37,7 @@ from scipy.spatial import cKDTree
 from services.common import voxels
 from services.common.arrays import in_sorted, unique_sorted
 from services.evaluator import metrics as mx
+from services.evaluator.point_slots import PointSlots
 from services.evaluator.scoring import Probe, map_quality
 from services.evaluator.truth_cells import TruthIndex
 
@@ -69,7 +70,8 @@ class MapTally:
     (`metrics.covered_mask`). With a ghost test, a voxel all of whose points fail it is a
     ghost: its points are kept but do not count (`Probe.ghost_point_mask`). The voxels'
     verdicts are kept as counts per voxel (points held, points that pass the test) and
-    redrawn for the voxels a sample touched only.
+    redrawn for the voxels a sample touched only; without a test every point counts, and no
+    voxels are counted (`n_voxels`, `n_ghost` stay 0).
 
     Two ways in: `update(points)`, the whole map, its points known by their coordinates;
     `apply(ids, points, whole)`, points known by a key (`keyed_ids`), either the whole map
@@ -79,12 +81,9 @@ class MapTally:
     def __init__(self, truth: TruthIndex, voxel_m: float, ghost: GhostTest | None) -> None:
         self.truth, self.voxel_m, self.ghost = truth, voxel_m, ghost
         self.keyed = False  # ids are keyed_ids (apply), not coordinate hashes (update)
-        self.ids = np.zeros(0, np.uint64)
-        self.points = np.zeros((0, 3))
-        self.near = np.zeros(0, bool)  # per point: passes the ghost test on its own
-        self.counting = np.zeros(0, bool)
-        self.voxel = np.zeros(0, np.int64)  # per point: its voxel's key
-        self.cell = np.zeros(0, np.int64)  # per point: its truth cell (TruthIndex.cells_of)
+        self.store = PointSlots()  # the held points, by slot
+        self.ids = np.zeros(0, np.uint64)  # sorted ids of the held points
+        self.slot = np.zeros(0, np.int64)  # their slots, in id order
         self.covered = np.zeros(len(truth), bool)
         self.witness = np.zeros(len(truth), np.uint64)  # per covered truth point: a coverer
         self.vkeys = np.zeros(0, np.int64)  # sorted keys of the occupied voxels
@@ -135,7 +134,7 @@ class MapTally:
         found = pos < self.ids.size
         found[found] = self.ids[pos[found]] == ids[found]
         same = found.copy()
-        same[found] = np.all(self.points[pos[found]] == pts[found], axis=1)
+        same[found] = np.all(self.store.points[self.slot[pos[found]]] == pts[found], axis=1)
         if whole:
             removed = np.ones(self.ids.size, bool)
             removed[pos[same]] = False
@@ -145,36 +144,39 @@ class MapTally:
         return same, removed
 
     def _apply(self, removed: np.ndarray, add_ids: np.ndarray, add_pts: np.ndarray) -> None:
-        """Take back the `removed` held points and score the new ones (sorted ids, none a
-        kept point's)."""
-        keep = ~removed
-        kept_of = (lambda a: a[keep]) if removed.any() else (lambda a: a)  # no copy if none
+        """Take back the `removed` held points (a mask over `ids`) and score the new ones
+        (sorted ids, none a kept point's)."""
+        store = self.store
+        gone = self.slot[removed]
         add_near = self.near_of(add_pts)
         add_voxel = voxels.pack(voxels.voxel_indices(add_pts, self.voxel_m))
-        flipped = self._recount(self.voxel[removed], self.near[removed], add_voxel, add_near)
-        was = kept_of(self.counting)
-        kept = was.copy()  # a held point's verdict changes only with its voxel's
-        kept_voxel = kept_of(self.voxel)
-        if flipped.size:
-            hit = in_sorted(kept_voxel, flipped)
-            kept[hit] = self._cleared(kept_voxel[hit])
+        flipped = np.zeros(0, np.int64)
+        if self.ghost is not None:  # without a test every point counts: no verdicts to keep
+            flipped = self._recount(store.voxel[gone], store.near[gone], add_voxel, add_near)
+        lost = gone[store.counting[gone]]
+        store.kill(gone)
+        stop = start = np.zeros(0, np.int64)
+        if flipped.size:  # a kept point's verdict changes only with its voxel's
+            hit = np.flatnonzero(store.used("alive") & in_sorted(store.used("voxel"), flipped))
+            now = self._cleared(store.voxel[hit])
+            stop, start = hit[store.counting[hit] & ~now], hit[~store.counting[hit] & now]
+            store.counting[hit] = now
         add_counting = self._cleared(add_voxel)
-        kept_points, kept_ids = kept_of(self.points), kept_of(self.ids)
-        lost = removed & self.counting
-        lost_pts = np.concatenate([self.points[lost], kept_points[was & ~kept]])
-        lost_ids = np.concatenate([self.ids[lost], kept_ids[was & ~kept]])
-        gained = kept & ~was
-        gained_pts = np.concatenate([add_pts[add_counting], kept_points[gained]])
-        gained_ids = np.concatenate([add_ids[add_counting], kept_ids[gained]])
-        at = np.searchsorted(kept_ids, add_ids)
-        self.ids = np.insert(kept_ids, at, add_ids)
-        self.points = np.insert(kept_points, at, add_pts, axis=0)
-        self.near = np.insert(kept_of(self.near), at, add_near)
-        self.counting = np.insert(kept, at, add_counting)
-        self.voxel = np.insert(kept_voxel, at, add_voxel)
-        self.cell = np.insert(kept_of(self.cell), at, self.truth.cells_of(add_pts))
-        self._uncover(lost_pts, lost_ids)
-        self._cover(gained_pts, gained_ids)
+        new = store.append(add_ids, add_pts, add_near, add_counting, add_voxel,
+                           self.truth.cells_of(add_pts))
+        if removed.any():
+            keep = ~removed
+            self.ids, self.slot = self.ids[keep], self.slot[keep]
+        at = np.searchsorted(self.ids, add_ids)
+        self.ids = np.insert(self.ids, at, add_ids)
+        self.slot = np.insert(self.slot, at, new)
+        lost = np.concatenate([lost, stop])
+        self._uncover(store.points[lost], store.ids[lost])
+        gained = np.concatenate([new[add_counting], start])
+        self._cover(store.points[gained], store.ids[gained])
+        moved = store.compact()
+        if moved is not None:
+            self.slot = moved[self.slot]
 
     def near_of(self, new_pts: np.ndarray) -> np.ndarray:
         """Which new points pass the ghost test on their own (all, without one)."""
@@ -242,8 +244,9 @@ class MapTally:
         cand = cand[in_sorted(self.witness[cand], unique_sorted(gone_ids))]
         if cand.size == 0:
             return
-        local = self.truth.near_cells(self.cell, cand) & self.counting
-        self._ask(cand, self.points[local], self.ids[local])
+        store = self.store
+        local = self.truth.near_cells(store.used("cell"), cand) & store.used("counting")
+        self._ask(cand, store.used("points")[local], store.used("ids")[local])
 
     def _ask(self, cand: np.ndarray, pts: np.ndarray, ids: np.ndarray) -> None:
         """Set the truth points `cand` covered or not by `pts` (`metrics.covered_mask`'s

@@ -31,7 +31,7 @@ class TruthIndex:
 
     def __init__(self, points: np.ndarray, radius_m: float) -> None:
         self.points, self.radius_m = points, radius_m
-        self.cell_m = 1.25 * radius_m  # the margin keeps float rounding off the bound
+        self.cell_m = radius_m * (1 + 1e-6)  # the margin keeps float rounding off the bound
         # a point in a truth point's own cell of side radius/2 lies within 0.87·radius of it
         self.fine_m = radius_m / 2
         self.fine = self.fine_cells_of(points)

@@ -159,7 +159,8 @@ def _record(
                                        recorders)
         finally:
             recorders.close()
-    write_profile(out_dir / PROFILE, cpu_s, wall_s, float(metrics["sim_time_s"]), sampler.cpu_s)
+    write_profile(out_dir / PROFILE, cpu_s, wall_s, float(metrics["sim_time_s"]), sampler.cpu_s,
+                  sampler.stage_cpu_s)
     return metrics
 
 
@@ -177,10 +178,12 @@ def _cpu_seconds(group: ProcessGroup | None) -> dict[str, float]:
 
 
 def write_profile(path: Path, cpu_s: dict[str, float], wall_s: float, sim_s: float,
-                  sampler_cpu_s: float = 0.0) -> None:
+                  sampler_cpu_s: float = 0.0,
+                  sampler_stages: dict[str, float] | None = None) -> None:
     """profile.json: where a mission's CPU went (bench/bench_mission.py reads it); the
-    launcher's figure includes its live coverage sampler's thread, `sampler_cpu_s`, and
-    `sampler_core_pct` is that thread's share of one core over the mission."""
+    launcher's figure includes its live coverage sampler's thread, `sampler_cpu_s` (by stage
+    in `sampler_stage_cpu_s`), and `sampler_core_pct` is that thread's share of one core
+    over the mission."""
     profile = {
         "wall_time_s": round(wall_s, 3),
         "sim_time_s": sim_s,
@@ -188,6 +191,7 @@ def write_profile(path: Path, cpu_s: dict[str, float], wall_s: float, sim_s: flo
         "cpu_s": {name: round(sec, 2) for name, sec in sorted(cpu_s.items())},
         "cpu_s_total": round(sum(cpu_s.values()), 2),
         "sampler_cpu_s": round(sampler_cpu_s, 2),
+        "sampler_stage_cpu_s": {k: round(v, 2) for k, v in (sampler_stages or {}).items()},
         "sampler_core_pct": round(100.0 * sampler_cpu_s / wall_s, 2) if wall_s > 0 else None,
     }
     path.write_text(json.dumps(profile, indent=2) + "\n")

@@ -152,6 +152,9 @@ class CoverageSampler:
         self.merged = CloudMirror()
         self.versions: dict[int, int] = {}  # per map (-1 merged): the edge version held
         self.cpu_s = 0.0  # the sampling thread's own CPU time (profile.json: `sampler_cpu_s`)
+        # its parts: the edge's answers (with the mirror), the tallies, the row (2D coverage),
+        # the recorders' writing (profile.json: `sampler_stage_cpu_s`)
+        self.stage_cpu_s = dict.fromkeys(("fetch", "score", "row", "record"), 0.0)
         self._rows_lock = threading.Lock()  # the final map is added from the main thread
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="coverage-sampler", daemon=True)
@@ -181,6 +184,7 @@ class CoverageSampler:
         """Ask for what changed in the merged map, then in each robot's own map, and add a
         row. The robot maps may be a tick or two newer than the merged one (separate
         queries)."""
+        start = time.thread_time()
         reply = self._fetch(-1)
         if reply is None:
             return
@@ -195,7 +199,10 @@ class CoverageSampler:
                 pts = cloud.points_world[cloud.robot_ids == robot].astype(np.float64)
                 changes.append(MapChange(pts))
         self._await_edge_tick(cloud.tick)
+        fetched = time.thread_time()
+        self.stage_cpu_s["fetch"] += fetched - start
         quality = self.quality.apply(changes[0], changes[1:])
+        self.stage_cpu_s["score"] += time.thread_time() - fetched
         if quality is None:
             log.warning("sample at tick %d: a map could not be updated; whole maps next time",
                         cloud.tick)
@@ -246,6 +253,8 @@ class CoverageSampler:
         self._add_row(cloud, quality)
 
     def _add_row(self, cloud: m.Cloud, quality: dict[str, float | None]) -> None:
+        mine = threading.current_thread() is self._thread  # stages count this thread's CPU
+        start = time.thread_time()
         grid, frontiers = self.monitor.at_tick(cloud.tick)
         row = series_row(self.probe, cloud, quality, grid, self.tick_s, frontiers)
         with self._rows_lock:
@@ -254,5 +263,9 @@ class CoverageSampler:
             if self.rows and row["sim_time_s"] == self.rows[-1]["sim_time_s"]:
                 self.rows.pop()  # the same edge tick answered twice: keep the newer view
             self.rows.append(row)
+            made = time.thread_time()
             for sink in self.sinks:
                 sink.on_sample(row, cloud)
+        if mine:
+            self.stage_cpu_s["row"] += made - start
+            self.stage_cpu_s["record"] += time.thread_time() - made
