@@ -256,8 +256,11 @@ class MapTally:
         if len(pts) == 0:
             self.covered[cand] = False
             return
-        dist, nearest = cKDTree(pts).query(self.truth.points[cand],
-                                           distance_upper_bound=self.truth.radius_m)
+        # a tree used once: the sliding-midpoint build (unbalanced, uncompacted) costs less,
+        # and the query's answer does not depend on the tree's shape
+        tree = cKDTree(pts, balanced_tree=False, compact_nodes=False)
+        dist, nearest = tree.query(self.truth.points[cand],
+                                   distance_upper_bound=self.truth.radius_m)
         hit = np.isfinite(dist)
         self.covered[cand] = hit
         self.witness[cand[hit]] = ids[nearest[hit]]
