@@ -107,6 +107,10 @@ def report(runs: list[dict], profiles: list[dict]) -> None:
     sampler = [float(p["sampler_core_pct"]) for p in profiles if p.get("sampler_core_pct")]
     if sampler:  # the live coverage sampler's thread, % of one core over the wall time
         _row("live sampler, % of a core", sampler)
+        stages = [p.get("sampler_stage_cpu_s") or {} for p in profiles]
+        for stage in sorted({k for st in stages for k in st}):
+            _row(f"live sampler CPU s: {stage}", [float(st[stage]) for st in stages
+                                                  if stage in st])
     print("\n| CPU s per process | median | min | max |\n|---|---:|---:|---:|")
     for kind, values in cpu_rows(profiles).items():
         _row(kind, values)

@@ -83,3 +83,30 @@ def test_the_fallback_table_scores_like_map_quality(seed: int, table: str) -> No
         maps = [step(rng, p) for p in maps]
         merged = np.unique(np.concatenate(maps), axis=0)
         assert_same(scorer(merged, maps), map_quality(probe, merged, maps))
+
+
+def test_probe_coverage_2d_equals_the_metric_as_the_grid_changes() -> None:
+    """The free truth cells' places are kept per grid geometry: a grown or moved grid is
+    looked up afresh."""
+    from schemas import messages as m
+    from services.common.grid import GridSpec
+    from services.evaluator import metrics as mx
+    from services.evaluator.free_space import FreeGrid
+    from services.evaluator.ground_truth import GroundTruth
+    from services.evaluator.scoring import Probe, grid_spec
+
+    rng = np.random.default_rng(2)
+    truth_spec = GridSpec(0.0, 0.0, 0.05, 40, 50)
+    free = rng.random(truth_spec.shape) < 0.6
+    probe = Probe(GroundTruth(FreeGrid(truth_spec, ~free, free, free), np.zeros((1, 3)),
+                              np.ones(1, bool)), EvalConfig())
+    seen = set()
+    for origin, shape in [((-0.3, -0.2), (30, 30)), ((-0.3, -0.2), (30, 30)),
+                          ((-0.3, -0.2), (60, 70)), ((0.51, 0.27), (25, 40))]:
+        cells = np.where(rng.random(shape) < 0.7, 0, -1).astype(np.int8)
+        grid = m.OccupancyGrid(tick=1, origin_x=origin[0], origin_y=origin[1],
+                               resolution_m=0.05, cells=cells)
+        want = mx.coverage_2d(cells >= 0, grid_spec(grid), free, truth_spec)
+        assert probe.coverage_2d(grid) == want
+        seen.add(round(want, 6))
+    assert len(seen) > 2

@@ -78,7 +78,10 @@ def test_samples_of_changes_score_as_the_whole_maps() -> None:
         for key in ("coverage_3d_pct", "overlap_3d_pct", "bounding_volume_pct"):
             assert row[key] == want[key], (tick, key)
         assert row["map_points"] == len(merged)
-        np.testing.assert_array_equal(sampler.merged.cloud.points_world, merged.points_world)
+        mirror = sampler.merged  # rows in arrival order; by key, the edge's map
+        np.testing.assert_array_equal(mirror.cloud.points_world[mirror.rows],
+                                      merged.points_world)
+        assert mirror.cloud.voxel_keys.size == 0 and len(mirror.keys) == len(merged)
     assert 0 < sampler.rows[-1]["bounding_volume_pct"] < 100
     deltas = [r for r in edge.replies if r.delta]
     assert len(deltas) > 30 and len(edge.replies) - len(deltas) > 6  # rebuilds: whole again

@@ -40,6 +40,7 @@ class Probe:
     _surface_tree: cKDTree | None = field(default=None, repr=False)
     _observable_tree: cKDTree | None = field(default=None, repr=False)
     _surface_cells: np.ndarray | None = field(default=None, repr=False)
+    _free_cells: tuple[GridSpec, np.ndarray, int] | None = field(default=None, repr=False)
 
     @property
     def surface_tree(self) -> cKDTree:
@@ -103,10 +104,18 @@ class Probe:
         )
 
     def coverage_2d(self, grid: m.OccupancyGrid | None) -> float | None:
+        """`metrics.coverage_2d` of a grid; the free truth cells' places in it are kept
+        while its geometry stays the same (the live series asks every sample)."""
         if grid is None:
             return None
-        fg = self.gt.free_grid
-        return mx.coverage_2d(grid.cells >= 0, grid_spec(grid), fg.free, fg.spec)
+        spec = grid_spec(grid)
+        if self._free_cells is None or self._free_cells[0] != spec:
+            fg = self.gt.free_grid
+            rc = spec.cell_of(fg.spec.centre_of(np.argwhere(fg.free)))
+            self._free_cells = (spec, rc[spec.contains(rc)], int(np.count_nonzero(fg.free)))
+        _, rc, free = self._free_cells
+        known = np.count_nonzero(grid.cells[rc[:, 0], rc[:, 1]] >= 0)
+        return 100.0 * float(known) / float(free) if free else 0.0
 
     def overlap_3d(self, robot_points: Sequence[np.ndarray] | None) -> float | None:
         """`metrics.overlap_3d` of the robots' own maps on the observable truth (None

@@ -66,9 +66,12 @@ def cloud(path: str, points: np.ndarray, colors: np.ndarray | None) -> list[Enti
 
 
 def merged_cloud(c: m.Cloud, mode: CloudColors) -> list[Entity]:
-    """The merged map P*, coloured by first observer (`robot`), height or camera colour."""
-    return cloud("world/map/cloud", c.points_world,
-                 cloud_colors(c.points_world, c.robot_ids, c.colors, mode))
+    """The merged map P*, coloured by first observer (`robot`), height or camera colour.
+    The points are copied: rerun may read them after `log` returns (zero-copy Arrow), and
+    the live sampler's cloud changes in place after each sample."""
+    colors = cloud_colors(c.points_world, c.robot_ids, c.colors, mode)
+    return cloud("world/map/cloud", c.points_world.copy(),
+                 colors.copy() if colors is c.colors else colors)
 
 
 def robot_body(robot: int) -> list[Entity]:

@@ -104,38 +104,64 @@ def series_row(probe: Probe, cloud: m.Cloud, quality: dict[str, float | None] | 
 
 class CloudMirror:
     """The sampler's copy of one edge map, kept by the edge's answers: whole ones replace it,
-    delta ones replace or add the voxels they carry (by key)."""
+    delta ones overwrite the voxels they carry in place or append new ones. Its points are
+    in the order the voxels arrived, not by key: a sorted index of keys to rows finds them,
+    so a sample costs what changed plus one insert of the new keys into that index."""
 
     def __init__(self) -> None:
-        self.keys = np.zeros(0, np.int64)
-        self.cloud = m.Cloud(tick=0, points_world=np.zeros((0, 3), np.float32),
-                             colors=np.zeros((0, 3), np.uint8), robot_ids=np.zeros(0, np.uint8))
+        self.keys = np.zeros(0, np.int64)  # sorted voxel keys held
+        self.rows = np.zeros(0, np.int64)  # their rows, in key order
+        self.size = 0
+        self.points = np.zeros((0, 3), np.float32)
+        self.colors = np.zeros((0, 3), np.uint8)
+        self.robot_ids = np.zeros(0, np.uint8)
+        self.cloud = m.Cloud(tick=0, points_world=self.points, colors=self.colors,
+                             robot_ids=self.robot_ids)
 
     def apply(self, reply: m.Cloud) -> m.Cloud:
-        """The whole map after `reply` (a validated Cloud)."""
+        """The whole map after `reply` (a validated Cloud), its points in arrival order."""
         if not reply.delta:
-            self.keys, self.cloud = reply.voxel_keys, reply
-            return reply
-        pos = np.searchsorted(self.keys, reply.voxel_keys)
+            self.size = 0
+            self.keys = self.rows = np.zeros(0, np.int64)
+            if reply.voxel_keys.size != len(reply.points_world):  # an edge that sends no keys
+                self.cloud = reply
+                return reply
+        keys = reply.voxel_keys
+        pos = np.searchsorted(self.keys, keys)
         held = pos < self.keys.size
-        held[held] = self.keys[pos[held]] == reply.voxel_keys[held]
-        at, new = pos[~held], ~held
-        arrays = []
-        for mine, theirs in ((self.cloud.points_world, reply.points_world),
-                             (self.cloud.colors, reply.colors),
-                             (self.cloud.robot_ids, reply.robot_ids)):
-            mine = mine.copy()
-            mine[pos[held]] = theirs[held]
-            arrays.append(np.insert(mine, at, theirs[new], axis=0))
-        self.keys = np.insert(self.keys, at, reply.voxel_keys[new])
-        self.cloud = m.Cloud(tick=reply.tick, robot_id=reply.robot_id, points_world=arrays[0],
-                             colors=arrays[1], robot_ids=arrays[2], voxel_keys=self.keys,
-                             version=reply.version)
+        held[held] = self.keys[pos[held]] == keys[held]
+        rows = np.empty(keys.size, np.int64)
+        rows[held] = self.rows[pos[held]]
+        rows[~held] = self.size + np.arange(np.count_nonzero(~held))
+        self._reserve(self.size + rows.size - np.count_nonzero(held))
+        self.points[rows] = reply.points_world
+        self.colors[rows] = reply.colors
+        self.robot_ids[rows] = reply.robot_ids
+        self.size += rows.size - np.count_nonzero(held)
+        self.keys = np.insert(self.keys, pos[~held], keys[~held])
+        self.rows = np.insert(self.rows, pos[~held], rows[~held])
+        self.cloud = m.Cloud(tick=reply.tick, robot_id=reply.robot_id,
+                             points_world=self.points[:self.size],
+                             colors=self.colors[:self.size],
+                             robot_ids=self.robot_ids[:self.size], version=reply.version)
         return self.cloud
+
+    def _reserve(self, rows: int) -> None:
+        """Room for `rows` rows (doubling): the arrays a cloud handed out stay as they were."""
+        if rows <= self.points.shape[0]:
+            return
+        capacity = max(1024, 2 * rows)
+        for name in ("points", "colors", "robot_ids"):
+            old = getattr(self, name)
+            grown = np.zeros((capacity, *old.shape[1:]), old.dtype)
+            grown[:self.size] = old[:self.size]
+            setattr(self, name, grown)
 
 
 class SampleSink(Protocol):
-    """A reader of each time-series row and the merged cloud it was scored on."""
+    """A reader of each time-series row and the merged cloud it was scored on. The cloud's
+    arrays are the sampler's copy of the map (`CloudMirror`), changed in place by the next
+    sample: a sink copies what it keeps."""
 
     def on_sample(self, row: dict[str, Any], cloud: m.Cloud) -> None: ...
 
