@@ -8,8 +8,8 @@ point) cost the launcher 58 of its 69 CPU-seconds in a 135 s house mission on tw
 The figures equal `scoring.map_quality`'s on the same points exactly, not approximately:
 - coverage is `metrics.covered_mask`'s query, asked only about the truth around what changed
   (`truth_cells.TruthIndex`). New counting points are asked about the uncovered truth around
-  them: a truth point with one of them in its own cell of side radius/2 is covered unasked
-  (they lie within 0.87·radius). Each covered truth point keeps one covering point as its
+  them: a truth point with one of them in its own cell of side radius/2 (in either of two
+  grids offset by half a cell) is covered unasked (they lie within 0.87·radius). Each covered truth point keeps one covering point as its
   witness; only truth whose witness went, moved or stopped counting is asked again, of the
   counting points around it. (A count of covering points per truth point would make
   removals a subtraction, but listing every (point, truth) pair within the radius cost more
@@ -225,14 +225,17 @@ class MapTally:
         cand = cand[~self.covered[cand]]
         if cand.size == 0:
             return
-        keys = self.truth.fine_cells_of(new_pts)  # first: a new point in the same fine cell
-        order = np.argsort(keys, kind="stable")
-        keys = keys[order]
-        at = np.minimum(np.searchsorted(keys, self.truth.fine[cand]), keys.size - 1)
-        same = keys[at] == self.truth.fine[cand]
-        self.covered[cand[same]] = True
-        self.witness[cand[same]] = new_ids[order[at[same]]]
-        self._ask(cand[~same], new_pts, new_ids)
+        for shifted in (False, True):  # first: a new point in the same fine cell
+            keys = self.truth.fine_cells_of(new_pts, shifted)
+            order = np.argsort(keys, kind="stable")
+            keys = keys[order]
+            truth_keys = (self.truth.fine_shifted if shifted else self.truth.fine)[cand]
+            at = np.minimum(np.searchsorted(keys, truth_keys), keys.size - 1)
+            same = keys[at] == truth_keys
+            self.covered[cand[same]] = True
+            self.witness[cand[same]] = new_ids[order[at[same]]]
+            cand = cand[~same]
+        self._ask(cand, new_pts, new_ids)
 
     def _uncover(self, gone_pts: np.ndarray, gone_ids: np.ndarray) -> None:
         """Covered truth whose witness went (or moved) is asked again of the counting points

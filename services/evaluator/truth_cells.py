@@ -35,6 +35,7 @@ class TruthIndex:
         # a point in a truth point's own cell of side radius/2 lies within 0.87·radius of it
         self.fine_m = radius_m / 2
         self.fine = self.fine_cells_of(points)
+        self.fine_shifted = self.fine_cells_of(points, shifted=True)
         idx = voxels.voxel_indices(points, self.cell_m).reshape(-1, 3)
         self.lo = idx.min(axis=0) - 1 if len(idx) else np.zeros(3, np.int64)
         self.shape = (idx.max(axis=0) + 2 - self.lo) if len(idx) else np.full(3, 3, np.int64)
@@ -55,8 +56,12 @@ class TruthIndex:
     def __len__(self) -> int:
         return len(self.points)
 
-    def fine_cells_of(self, pts: np.ndarray) -> np.ndarray:
-        """(N,) int64 packed key of each point's cell of side radius/2."""
+    def fine_cells_of(self, pts: np.ndarray, shifted: bool = False) -> np.ndarray:
+        """(N,) int64 packed key of each point's cell of side radius/2, in the grid shifted
+        by half a cell on every axis when `shifted` (a second chance at sharing a cell)."""
+        pts = np.asarray(pts, dtype=np.float64).reshape(-1, 3)
+        if shifted:
+            pts = pts + self.fine_m / 2
         return voxels.pack(voxels.voxel_indices(pts, self.fine_m).reshape(-1, 3))
 
     def cells_of(self, pts: np.ndarray) -> np.ndarray:
