@@ -7,10 +7,15 @@ import numpy as np
 import pytest
 from scipy.spatial.distance import cdist
 
+from schemas import messages as m
+from services.common.grid import GridSpec
+from services.evaluator import metrics as mx
 from services.evaluator import truth_cells
 from services.evaluator.config import EvalConfig
+from services.evaluator.free_space import FreeGrid
+from services.evaluator.ground_truth import GroundTruth
 from services.evaluator.incremental import LiveQuality
-from services.evaluator.scoring import map_quality
+from services.evaluator.scoring import Probe, grid_spec, map_quality
 from services.evaluator.truth_cells import TruthIndex
 from tests.test_eval_incremental import assert_same, box_probe, lattice, step
 
@@ -88,13 +93,6 @@ def test_the_fallback_table_scores_like_map_quality(seed: int, table: str) -> No
 def test_probe_coverage_2d_equals_the_metric_as_the_grid_changes() -> None:
     """The free truth cells' places are kept per grid geometry: a grown or moved grid is
     looked up afresh."""
-    from schemas import messages as m
-    from services.common.grid import GridSpec
-    from services.evaluator import metrics as mx
-    from services.evaluator.free_space import FreeGrid
-    from services.evaluator.ground_truth import GroundTruth
-    from services.evaluator.scoring import Probe, grid_spec
-
     rng = np.random.default_rng(2)
     truth_spec = GridSpec(0.0, 0.0, 0.05, 40, 50)
     free = rng.random(truth_spec.shape) < 0.6

@@ -9,11 +9,12 @@ The figures equal `scoring.map_quality`'s on the same points exactly, not approx
 - coverage is `metrics.covered_mask`'s query, asked only about the truth around what changed
   (`truth_cells.TruthIndex`). New counting points are asked about the uncovered truth around
   them: a truth point with one of them in its own cell of side radius/2 (in either of two
-  grids offset by half a cell) is covered unasked (they lie within 0.87·radius). Each covered truth point keeps one covering point as its
-  witness; only truth whose witness went, moved or stopped counting is asked again, of the
-  counting points around it. (A count of covering points per truth point would make
-  removals a subtraction, but listing every (point, truth) pair within the radius cost more
-  than scoring from scratch: ~30 pairs a point.)
+  grids offset by half a cell) is covered unasked (they lie within 0.87·radius). Each
+  covered truth point keeps one covering point as its witness; only truth whose witness
+  went, moved or stopped counting is asked again, of the counting points around it. (A
+  count of covering points per truth point would make removals a subtraction, but listing
+  every (point, truth) pair within the radius cost more than scoring from scratch: ~30
+  pairs a point.)
 - a ghost is a per-voxel verdict (`Probe.ghost_point_mask`): a voxel of `voxel_m` is a ghost
   when none of its points lies within `ghost_dist_m` of a surface. Each point's own test is
   made once, when it appears; the voxels' verdicts are redrawn each sample from those (the
