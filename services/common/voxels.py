@@ -28,6 +28,11 @@ def pack(indices: np.ndarray) -> np.ndarray:
     return (shifted[:, 0] << (2 * _BITS)) | (shifted[:, 1] << _BITS) | shifted[:, 2]
 
 
+def z_of(keys: np.ndarray) -> np.ndarray:
+    """(N,) int64 z index of each key (= unpack(keys)[:, 2], without the other two)."""
+    return (np.asarray(keys, dtype=np.int64) & _MASK) - _OFFSET
+
+
 def unpack(keys: np.ndarray) -> np.ndarray:
     """(N,) int64 keys → (N, 3) int64 indices."""
     keys = np.asarray(keys, dtype=np.int64)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from services.common.voxels import unpack
+from services.common.voxels import unpack, z_of
 from services.edge_server.ball_sums import MAX_K, pack_fields, unpack_fields
 from services.edge_server.frontiers3d import PointFrontiers, ball_offsets, full_ball_variance
 
@@ -117,8 +117,7 @@ class IncrementalFrontiers:
         self.stats.apply(unpack(removed), -1)
         self.stats.apply(unpack(added), +1)
         self.keys = keys
-        idx = unpack(keys)
-        idx = idx[self._low_enough(idx[:, 2])]
+        idx = unpack(keys[self._low_enough(z_of(keys))])  # filtered first: unpack costs
         if idx.shape[0] == 0:
             return self._points(idx, np.zeros((5, 0), np.int64))
         return self._points(idx, self.stats.read(idx))

@@ -125,8 +125,10 @@ def neg_x_log_x(x: np.ndarray) -> np.ndarray:
     return out
 
 
-def point_entropy(pf: PointFrontiers, weak: bool) -> np.ndarray:
-    """(N,) −ρ̂ log ρ̂ (ρ̂ = ρ / K) or −σ̂² log σ̂² (σ̂² = σ² / σ²_ball): both in [0, 1/e]."""
+def point_entropy(pf: PointFrontiers, weak: bool, sel: np.ndarray | None = None) -> np.ndarray:
+    """(N,) −ρ̂ log ρ̂ (ρ̂ = ρ / K) or −σ̂² log σ̂² (σ̂² = σ² / σ²_ball): both in [0, 1/e];
+    of the voxels `sel` only when given (elementwise: the same values)."""
+    pick = slice(None) if sel is None else sel
     if weak:
-        return neg_x_log_x(pf.var_m2 / pf.full_var_m2)
-    return neg_x_log_x(pf.rho / pf.full_count)
+        return neg_x_log_x(pf.var_m2[pick] / pf.full_var_m2)
+    return neg_x_log_x(pf.rho[pick] / pf.full_count)

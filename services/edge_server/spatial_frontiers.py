@@ -79,7 +79,7 @@ def class_regions(
     sel, lab = sel[ok], lab[ok]
     count = np.bincount(lab, minlength=n)
     denom = np.maximum(count, 1)
-    gain = np.bincount(lab, point_entropy(pf, weak)[sel], n) / denom
+    gain = np.bincount(lab, point_entropy(pf, weak, sel), n) / denom
     z = np.bincount(lab, pf.points_world[sel, 2], n) / denom
     xy = np.stack([np.bincount(lab, pf.points_world[sel, d], n) for d in (0, 1)], 1)
     fs = FrontierSet(labels=fs.labels, sizes=count, centroid_xy=xy / denom[:, None],
