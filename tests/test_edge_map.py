@@ -249,14 +249,29 @@ def test_grid_free_cells_cached_union_equals_from_scratch() -> None:
                                 rng.integers(-30, 30, (40, 2))))
         seq[robot] += 1
 
+    def cells_of(g: MergedGrid) -> np.ndarray:
+        stable, newest = g._all_free_rc(store)
+        return np.unique(np.concatenate([stable, *newest]), axis=0)
+
     def from_scratch() -> np.ndarray:
-        fresh = MergedGrid(EdgeConfig())
-        return np.unique(fresh._all_free_rc(store), axis=0)
+        return cells_of(MergedGrid(EdgeConfig()))
+
+    merged, drawn = MergedMap(V), MergedGrid(EdgeConfig())
+
+    def same_drawing() -> bool:
+        """The grid drawn with the cached union's mask equals one drawn from scratch."""
+        merged.update(store)
+        snap, fresh = drawn.update(store, merged), MergedGrid(EdgeConfig()).update(store, merged)
+        return snap.spec == fresh.spec and np.array_equal(snap.cells, fresh.cells)
 
     steps = [(0, 0), (1, 0), (0, 0), (0, 1), (1, 1), (0, 2), (0, 1), (1, 2), (1, 0)]
     for tick, (robot, submap) in enumerate(steps):
         send(robot, submap, tick)
-        assert np.array_equal(np.unique(grid._all_free_rc(store), axis=0), from_scratch())
+        assert np.array_equal(cells_of(grid), from_scratch())
+        assert same_drawing()
     store.set_pose((0, 1), T_from_xyyaw(0.5, -0.4, 0.7))  # a stable submap moves
-    assert np.array_equal(np.unique(grid._all_free_rc(store), axis=0), from_scratch())
+    assert np.array_equal(cells_of(grid), from_scratch())
+    assert same_drawing()
+    send(0, 3, len(steps))  # the stable set gains a submap: drawn in, not redrawn
+    assert same_drawing()
     assert len(grid._stable[0]) == 4  # all but each robot's newest

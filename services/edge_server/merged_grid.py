@@ -88,11 +88,15 @@ class MergedGrid:
         self._free_rc: dict[SubmapKey, tuple[Stamp, np.ndarray]] = {}
         self._obstacle_rc: tuple[int, np.ndarray] = (-1, np.zeros((0, 2), np.int64))
         self._stable: tuple[dict[SubmapKey, Stamp], np.ndarray] = ({}, np.zeros((0, 2), np.int64))
+        # the stable union drawn on a grid: (spec, mask), and the cells it gained since (None:
+        # it lost some, draw it again)
+        self._stable_mask: tuple[GridSpec | None, np.ndarray] = (None, np.zeros((0, 0), bool))
+        self._stable_gained: list[np.ndarray] | None = None
 
-    def _all_free_rc(self, store: SubmapStore) -> np.ndarray:
-        """Absolute world cells of every submap's free cells (duplicates possible), cached per
-        submap version; the union of all but each robot's newest submap is cached as one
-        deduplicated set (those rarely change, and overlapping submaps repeat most cells)."""
+    def _all_free_rc(self, store: SubmapStore) -> tuple[np.ndarray, list[np.ndarray]]:
+        """Absolute world cells of every submap's free cells, cached per submap version: the
+        deduplicated union of all but each robot's newest submap (those rarely change, and
+        overlapping submaps repeat most cells), and the newest submaps' cells."""
         res = self.config.grid_resolution_m
         cells: dict[SubmapKey, np.ndarray] = {}
         stamps: dict[SubmapKey, Stamp] = {}
@@ -107,7 +111,7 @@ class MergedGrid:
         stable = {k: stamps[k] for k in sorted(cells) if k not in newest.values()}
         if stable != self._stable[0]:
             self._stable = (stable, self._stable_union(stable, cells))
-        return np.concatenate([self._stable[1]] + [cells[k] for k in sorted(newest.values())])
+        return self._stable[1], [cells[k] for k in sorted(newest.values())]
 
     def _stable_union(self, stable: dict[SubmapKey, Stamp],
                       cells: dict[SubmapKey, np.ndarray]) -> np.ndarray:
@@ -118,10 +122,39 @@ class MergedGrid:
         grown = before.keys() <= stable.keys() and all(
             stable[k][1:] == stamp[1:] for k, stamp in before.items())
         if not grown:
+            self._stable_gained = None
             return (unique_rows_2(np.concatenate([cells[k] for k in stable])) if stable
                     else np.zeros((0, 2), np.int64))
-        changed = [cells[k] for k, stamp in stable.items() if before.get(k) != stamp]
-        return union_rows_2(union, np.concatenate(changed))
+        changed = np.concatenate([cells[k] for k, stamp in stable.items()
+                                  if before.get(k) != stamp])
+        if self._stable_gained is not None:
+            self._stable_gained.append(changed)
+        return union_rows_2(union, changed)
+
+    def _free_mask(self, spec: GridSpec, newest: list[np.ndarray]) -> np.ndarray:
+        """The free cells of every submap on the grid `spec`: the stable union's drawing
+        (kept while the grid's geometry stays, with the cells it gained drawn in), then the
+        newest submaps' cells."""
+        drawn_spec, mask = self._stable_mask
+        if drawn_spec != spec or self._stable_gained is None:
+            mask = np.zeros(spec.shape, bool)
+            _mark(mask, spec, self._stable[1])
+        else:
+            for rc in self._stable_gained:
+                _mark(mask, spec, rc)
+        self._stable_mask, self._stable_gained = (spec, mask), []
+        free = mask.copy()
+        for rc in newest:
+            _mark(free, spec, rc)
+        return free
+
+    @staticmethod
+    def _extremes_xy(rc: np.ndarray, res: float) -> np.ndarray:
+        """(2, 2) the lowest and highest cell-centre xy of absolute cells `rc`: the centre
+        is monotone in the index, so these equal the extremes of every cell's centre."""
+        if rc.shape[0] == 0:
+            return np.zeros((0, 2))
+        return (np.stack([rc.min(axis=0), rc.max(axis=0)])[:, ::-1] + 0.5) * res
 
     def _band_xy(self, points_world: np.ndarray) -> np.ndarray:
         z = points_world[:, 2]
@@ -142,7 +175,7 @@ class MergedGrid:
     ) -> GridSnapshot | None:
         """The grid for the current data; `extra_xy` (e.g. robot positions) must fit too."""
         res = self.config.grid_resolution_m
-        free_rc = self._all_free_rc(store)
+        stable_rc, newest_rc = self._all_free_rc(store)
         if self._obstacle_rc[0] != merged.version:
             added = getattr(merged, "added_keys", None)
             if self._obstacle_rc[0] == merged.version - 1 and added is not None:
@@ -154,18 +187,16 @@ class MergedGrid:
             self._obstacle_rc = (merged.version, rc)
         obstacle_rc = self._obstacle_rc[1]
         if self.config.grid_bounds_m is None:
-            free_xy = (free_rc[:, ::-1] + 0.5) * res
-            obstacle_xy = (obstacle_rc[:, ::-1] + 0.5) * res
-            xy = [free_xy, obstacle_xy] + ([extra_xy] if extra_xy is not None else [])
+            xy = [self._extremes_xy(rc, res) for rc in [stable_rc, *newest_rc, obstacle_rc]]
+            xy += [extra_xy] if extra_xy is not None else []
             self.bounds = grow_bounds(
                 self.bounds, np.concatenate(xy), self.config.grid_margin_m, self.config.grid_chunk_m
             )
         spec = self.spec()
         if spec is None:
             return None
-        free = np.zeros(spec.shape, bool)
+        free = self._free_mask(spec, newest_rc)
         occupied = np.zeros(spec.shape, bool)
-        _mark(free, spec, free_rc)
         _mark(occupied, spec, obstacle_rc)
         free &= ~occupied
         cells = np.full(spec.shape, UNKNOWN, np.int8)
