@@ -8,7 +8,7 @@ from schemas.messages import GoalStatus, Pose2D, RobotPose
 from services.common.grid import GridSpec
 from services.edge_server.completion import CompletionJudge
 from services.edge_server.config import EdgeConfig
-from services.edge_server.frontiers import detect_frontiers, frontier_cells
+from services.edge_server.frontiers import _anchors, detect_frontiers, frontier_cells
 from services.edge_server.planner import EdgePlanner
 from tests.test_edge_map import make_submap, voxel_centres
 
@@ -37,6 +37,27 @@ def test_frontiers_at_the_boundary_and_none_when_closed() -> None:
     assert free[r, c]  # goal f′ is an allowed cell
     free, occupied = room(closed=True)
     assert len(detect_frontiers(free, free | occupied, free, spec, EdgeConfig())) == 0
+
+
+def test_anchor_is_the_cell_nearest_the_centroid_first_in_row_order_on_a_tie() -> None:
+    """Each cluster's anchor is what a stable sort by (cluster, squared distance to its
+    centroid) puts first; symmetric clusters tie."""
+    rng = np.random.default_rng(8)
+    for _ in range(20):
+        labels = rng.integers(0, 5, (30, 40)).astype(np.int32)
+        labels[rng.random(labels.shape) < 0.5] = 0
+        labels[10:13, 10:13] = 5  # a 3×3 square: its centre is the unique nearest
+        labels[20, 5], labels[20, 7] = 6, 6  # two cells equally near their centroid
+        n = 6
+        centroid, anchor = _anchors(labels, n)
+        rc = np.argwhere(labels > 0)
+        lab = labels[rc[:, 0], rc[:, 1]] - 1
+        d2 = ((rc - centroid[lab]) ** 2).sum(axis=1)
+        order = np.lexsort((d2, lab))
+        first = np.ones(order.size, bool)
+        first[1:] = lab[order][1:] != lab[order][:-1]
+        assert np.array_equal(anchor, rc[order[first]])
+        assert tuple(anchor[4]) == (11, 11) and tuple(anchor[5]) == (20, 5)
 
 
 def test_tiny_clusters_dropped_and_goals_only_on_allowed_cells() -> None:

@@ -77,10 +77,14 @@ def _anchors(labels: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
         [np.bincount(lab, weights=rc[:, d], minlength=n) for d in (0, 1)], axis=1
     ) / counts[:, None]
     d2 = ((rc - centroid[lab]) ** 2).sum(axis=1)
-    order = np.lexsort((d2, lab))  # by cluster, then nearest first
-    first = np.ones(order.size, bool)
-    first[1:] = lab[order][1:] != lab[order][:-1]
-    return centroid, rc[order[first]]
+    # per cluster the nearest cell, the first in row-major order on a tie (what a stable
+    # sort by (cluster, d2) puts first), by two scatter-minima instead of a sort
+    nearest = np.full(n, np.inf)
+    np.minimum.at(nearest, lab, d2)
+    tied = np.flatnonzero(d2 == nearest[lab])
+    first = np.full(n, rc.shape[0])
+    np.minimum.at(first, lab[tied], tied)
+    return centroid, rc[first]
 
 
 def detect_frontiers(
