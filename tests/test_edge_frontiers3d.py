@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
+from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from services.common.grid import GridSpec
 from services.common.voxels import pack
 from services.edge_server.config import EdgeConfig
+from services.edge_server.frontiers import empty_frontiers
 from services.edge_server.frontiers3d import (
     ball_offsets,
     density_variance,
@@ -18,7 +22,7 @@ from services.edge_server.frontiers3d import (
 from services.edge_server.importance import distance_factor, importance, revenue
 from services.edge_server.merged_map import MergedMap
 from services.edge_server.planner import EdgePlanner
-from services.edge_server.spatial_frontiers import detect_spatial_frontiers
+from services.edge_server.spatial_frontiers import detect_spatial_frontiers, near_unknown
 from tests.test_edge_map import make_submap, voxel_centres
 from tests.test_edge_planning import corridor_planner, pose
 
@@ -166,3 +170,29 @@ def test_restart_epoch_and_resend_are_accepted() -> None:
     restarted = restarted.model_copy(update={"epoch": 50})
     store.apply(restarted)  # new epoch, seq starts at 0 again: accepted without a gap
     assert (0, 7) in store.submaps and store.seq_gaps[0] == 0
+
+
+def test_near_unknown_on_a_window_equals_the_whole_grid_transform() -> None:
+    """Regions within `max_m` of unknown space, from the transform of a window around them,
+    as from the whole grid's; and none when no unknown cell is within reach."""
+    rng = np.random.default_rng(11)
+    spec = GridSpec(0.0, 0.0, V, 80, 120)
+    seen = set()
+    for _ in range(30):
+        known = np.ones(spec.shape, bool)
+        for _ in range(int(rng.integers(0, 4))):  # unknown patches anywhere
+            r, c = rng.integers(0, 80), rng.integers(0, 120)
+            known[r:r + int(rng.integers(1, 8)), c:c + int(rng.integers(1, 8))] = False
+        labels = np.zeros(spec.shape, np.int32)
+        n = int(rng.integers(1, 6))
+        for lab in range(1, n + 1):
+            r, c = rng.integers(0, 75), rng.integers(0, 115)
+            labels[r:r + 4, c:c + 4] = lab
+        fs = replace(empty_frontiers(spec.shape), labels=labels, sizes=np.ones(n, np.int64))
+        dist = ndimage.distance_transform_edt(known) * V if not known.all() else None
+        want = (np.zeros(n, bool) if dist is None else
+                np.bincount(labels[(labels > 0) & (dist <= 0.5)] - 1, minlength=n) > 0)
+        got = near_unknown(fs, known, spec, 0.5)
+        assert np.array_equal(got, want)
+        seen.update(got.tolist())
+    assert seen == {True, False}

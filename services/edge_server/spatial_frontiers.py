@@ -94,10 +94,19 @@ def near_unknown(fs: FrontierSet, known: np.ndarray, spec: GridSpec, max_m: floa
     """(F,) bool: regions with a label cell within `max_m` of an unknown grid cell."""
     if not len(fs):
         return np.zeros(0, bool)
-    dist = ndimage.distance_transform_edt(known) * spec.resolution_m
-    close = (fs.labels > 0) & (dist <= max_m)
-    hit = np.bincount(fs.labels[close] - 1, minlength=len(fs)) > 0
-    return hit
+    # the transform of a window around the regions, padded past max_m: an unknown cell
+    # within max_m of a region lies inside it, so the distances that pass are the same
+    rc = np.argwhere(fs.labels > 0)
+    pad = int(np.ceil(max_m / spec.resolution_m)) + 1
+    lo = np.maximum(rc.min(axis=0) - pad, 0)
+    hi = np.minimum(rc.max(axis=0) + pad + 1, known.shape)
+    window = known[lo[0]:hi[0], lo[1]:hi[1]]
+    if window.all():  # no unknown cell within reach of any region
+        return np.zeros(len(fs), bool)
+    dist = ndimage.distance_transform_edt(window) * spec.resolution_m
+    labels = fs.labels[lo[0]:hi[0], lo[1]:hi[1]]
+    close = (labels > 0) & (dist <= max_m)
+    return np.bincount(labels[close] - 1, minlength=len(fs)) > 0
 
 
 def detect_spatial_frontiers(
