@@ -4,6 +4,7 @@ import numpy as np
 
 from services.common.arrays import (
     in_sorted,
+    missing_rows_2,
     union_rows_2,
     unique_first,
     unique_groups,
@@ -28,6 +29,9 @@ def test_unique_helpers_match_numpy() -> None:
     members = unique_sorted(k[::3])
     assert np.array_equal(in_sorted(k, members), np.isin(k, members))
     assert not in_sorted(k, np.zeros(0, np.int64)).any()
+    known = unique_rows_2(rc[::2])
+    want = np.array([r for r in rc if not any((known == r).all(axis=1))]).reshape(-1, 2)
+    assert np.array_equal(missing_rows_2(rc, known), want) and len(want)
 
 
 def test_union_rows_2_equals_a_unique_of_both() -> None:

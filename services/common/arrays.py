@@ -85,3 +85,9 @@ def union_rows_2(sorted_rc: np.ndarray, more_rc: np.ndarray) -> np.ndarray:
     if known.all():
         return _unpack_rows_2(old)
     return _unpack_rows_2(np.insert(old, at[~known], more[~known]))
+
+
+def missing_rows_2(rc: np.ndarray, sorted_rc: np.ndarray) -> np.ndarray:
+    """Rows of `rc` that are not rows of `sorted_rc` (an output of unique_rows_2)."""
+    keys, known = _pack_rows_2(rc), _pack_rows_2(sorted_rc)
+    return np.asarray(rc, np.int64).reshape(-1, 2)[~in_sorted(keys, known)]
