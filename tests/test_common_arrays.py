@@ -3,6 +3,7 @@
 import numpy as np
 
 from services.common.arrays import (
+    column_extremes,
     in_sorted,
     missing_rows_2,
     union_rows_2,
@@ -29,6 +30,10 @@ def test_unique_helpers_match_numpy() -> None:
     members = unique_sorted(k[::3])
     assert np.array_equal(in_sorted(k, members), np.isin(k, members))
     assert not in_sorted(k, np.zeros(0, np.int64)).any()
+    for a in (rc, rng.normal(size=(50, 3)).astype(np.float32)):
+        lo, hi = column_extremes(a)
+        assert np.array_equal(lo, a.min(axis=0)) and np.array_equal(hi, a.max(axis=0))
+        assert lo.dtype == a.dtype
     known = unique_rows_2(rc[::2])
     want = np.array([r for r in rc if not any((known == r).all(axis=1))]).reshape(-1, 2)
     assert np.array_equal(missing_rows_2(rc, known), want) and len(want)

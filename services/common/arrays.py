@@ -19,6 +19,14 @@ def unique_sorted(keys: np.ndarray) -> np.ndarray:
     return s[keep]
 
 
+def column_extremes(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(min, max) of each column of a non-empty (N, D) array (= a.min(axis=0), a.max(axis=0)),
+    column by column: numpy's axis-0 reduction of a narrow array is ~30× slower."""
+    a = np.asarray(a)
+    cols = [a[:, j] for j in range(a.shape[1])]
+    return (np.array([c.min() for c in cols], a.dtype), np.array([c.max() for c in cols], a.dtype))
+
+
 def in_sorted(keys: np.ndarray, sorted_set: np.ndarray) -> np.ndarray:
     """(N,) bool: each key is in `sorted_set` (sorted, unique) (= np.isin, by binary search)."""
     keys = np.asarray(keys)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from services.common.arrays import column_extremes
 from services.common.voxels import unpack, z_of
 from services.edge_server.ball_sums import MAX_K, pack_fields, unpack_fields
 from services.edge_server.frontiers3d import PointFrontiers, ball_offsets, full_ball_variance
@@ -47,8 +48,9 @@ class LatticeStats:
 
     def _fit(self, idx: np.ndarray) -> None:
         """Grow the box (snapped to CHUNK_VOX) so every stencil cell of `idx` lies inside."""
-        lo = idx.min(0) - self.pad
-        hi = idx.max(0) + self.pad + 1
+        idx_lo, idx_hi = column_extremes(idx)
+        lo = idx_lo - self.pad
+        hi = idx_hi + self.pad + 1
         if self.sums.size and (lo >= self.lo).all() and (hi <= self.lo + self.dims).all():
             return
         if self.sums.size:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from services.common.arrays import missing_rows_2, union_rows_2, unique_rows_2
+from services.common.arrays import column_extremes, missing_rows_2, union_rows_2, unique_rows_2
 from services.common.grid import GridSpec
 from services.common.voxels import centres, unpack
 from services.edge_server.config import EdgeConfig
@@ -165,9 +165,7 @@ class MergedGrid:
         is monotone in the index, so these equal the extremes of every cell's centre."""
         if rc.shape[0] == 0:
             return np.zeros((0, 2))
-        rows, cols = rc[:, 0], rc[:, 1]  # per column: numpy's axis-0 reduction of an (N, 2)
-        lo_hi = np.array([[rows.min(), cols.min()], [rows.max(), cols.max()]])  # is ~30× slower
-        return (lo_hi[:, ::-1] + 0.5) * res
+        return (np.stack(column_extremes(rc))[:, ::-1] + 0.5) * res
 
     def _band_xy(self, points_world: np.ndarray) -> np.ndarray:
         z = points_world[:, 2]

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from gtsam import Pose3
 
+from services.common.arrays import column_extremes
 from services.common.geometry import invert
 from services.common.pose_graph import Between, Prior, info_diag, optimize
 from services.common.registration import (
@@ -143,7 +144,7 @@ class MapMerger:
         cached = self._points.get(sm.key)
         if cached is None or cached[0] != sm.keys.size:
             points = sm.points.astype(np.float64)  # the agents' voxel means
-            cached = (sm.keys.size, points, np.stack([points.min(axis=0), points.max(axis=0)]))
+            cached = (sm.keys.size, points, np.stack(column_extremes(points)))
             self._points[sm.key] = cached
         return cached
 

@@ -16,6 +16,7 @@ from dataclasses import replace
 import numpy as np
 from scipy import ndimage
 
+from services.common.arrays import column_extremes
 from services.common.grid import GridSpec
 from services.common.voxels import unpack
 from services.edge_server.config import EdgeConfig
@@ -98,8 +99,9 @@ def near_unknown(fs: FrontierSet, known: np.ndarray, spec: GridSpec, max_m: floa
     # within max_m of a region lies inside it, so the distances that pass are the same
     rc = np.argwhere(fs.labels > 0)
     pad = int(np.ceil(max_m / spec.resolution_m)) + 1
-    lo = np.maximum(rc.min(axis=0) - pad, 0)
-    hi = np.minimum(rc.max(axis=0) + pad + 1, known.shape)
+    rc_lo, rc_hi = column_extremes(rc)
+    lo = np.maximum(rc_lo - pad, 0)
+    hi = np.minimum(rc_hi + pad + 1, known.shape)
     window = known[lo[0]:hi[0], lo[1]:hi[1]]
     if window.all():  # no unknown cell within reach of any region
         return np.zeros(len(fs), bool)

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from services.common.arrays import column_extremes
 from services.common.geometry import (
     T_from_xyyaw,
     invert,
@@ -162,7 +163,7 @@ class KeyframeGraph:
             return {}
         kf.points = pts
         kf.prepared = prepare(pts, self.params.registration)
-        kf.box = np.stack([pts.min(axis=0), pts.max(axis=0)])
+        kf.box = np.stack(column_extremes(pts))
         candidates = self._candidates(kf)
         if not candidates:
             return {}

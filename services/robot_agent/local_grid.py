@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from schemas.messages import OccupancyGrid
+from services.common.arrays import column_extremes
 from services.common.grid import GridSpec
 
 UNKNOWN, FREE, OCCUPIED = -1, 0, 100
@@ -91,8 +92,9 @@ class LocalGrid:
         xy = np.asarray(xy_world, np.float64).reshape(-1, 2)
         if spec.contains(spec.cell_of(xy)).all():
             return False
-        lo = np.floor((xy.min(axis=0) - margin_m - [spec.origin_x, spec.origin_y]) / cell)
-        hi = np.ceil((xy.max(axis=0) + margin_m - [spec.origin_x, spec.origin_y]) / cell)
+        xy_lo, xy_hi = column_extremes(xy)
+        lo = np.floor((xy_lo - margin_m - [spec.origin_x, spec.origin_y]) / cell)
+        hi = np.ceil((xy_hi + margin_m - [spec.origin_x, spec.origin_y]) / cell)
         before = np.maximum(-lo, 0).astype(int)  # cells to add below (x, y)
         after = np.maximum(hi - [spec.width, spec.height], 0).astype(int)
         if not (before.any() or after.any()):
@@ -120,7 +122,7 @@ class LocalGrid:
 
     def _extend(self, rc: np.ndarray) -> None:
         if rc.shape[0]:
-            lo, hi = rc.min(axis=0), rc.max(axis=0)
+            lo, hi = column_extremes(rc)
             self.row_lo, self.row_hi = min(self.row_lo, int(lo[0])), max(self.row_hi, int(hi[0]))
             self.col_lo, self.col_hi = min(self.col_lo, int(lo[1])), max(self.col_hi, int(hi[1]))
 
