@@ -172,9 +172,9 @@ class MapTally:
         self.ids = np.insert(self.ids, at, add_ids)
         self.slot = np.insert(self.slot, at, new)
         lost = np.concatenate([lost, stop])
-        self._uncover(store.points[lost], store.ids[lost])
+        self._uncover(store.ids[lost], store.cell[lost])
         gained = np.concatenate([new[add_counting], start])
-        self._cover(store.points[gained], store.ids[gained])
+        self._cover(store.points[gained], store.ids[gained], store.cell[gained])
         moved = store.compact()
         if moved is not None:
             self.slot = moved[self.slot]
@@ -219,10 +219,10 @@ class MapTally:
             return np.ones(voxel.size, bool)
         return self.vnear[np.searchsorted(self.vkeys, voxel)] > 0
 
-    def _cover(self, new_pts: np.ndarray, new_ids: np.ndarray) -> None:
+    def _cover(self, new_pts: np.ndarray, new_ids: np.ndarray, new_cells: np.ndarray) -> None:
         """Truth the new counting points cover (only uncovered truth around them is asked),
         each with the nearest of them as its witness."""
-        cand = self.truth.around(new_pts)
+        cand = self.truth.around_cells(new_cells)
         cand = cand[~self.covered[cand]]
         if cand.size == 0:
             return
@@ -238,12 +238,12 @@ class MapTally:
             cand = cand[~same]
         self._ask(cand, new_pts, new_ids)
 
-    def _uncover(self, gone_pts: np.ndarray, gone_ids: np.ndarray) -> None:
+    def _uncover(self, gone_ids: np.ndarray, gone_cells: np.ndarray) -> None:
         """Covered truth whose witness went (or moved) is asked again of the counting points
         around it: any other truth keeps a counting point within the radius, its witness."""
         if gone_ids.size == 0:
             return
-        cand = self.truth.around(gone_pts)  # a witness lies within the radius of its truth
+        cand = self.truth.around_cells(gone_cells)  # a witness lies within its truth's radius
         cand = cand[self.covered[cand]]
         cand = cand[in_sorted(self.witness[cand], unique_sorted(gone_ids))]
         if cand.size == 0:

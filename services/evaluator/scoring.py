@@ -39,7 +39,7 @@ class Probe:
     ev: EvalConfig
     _surface_tree: cKDTree | None = field(default=None, repr=False)
     _observable_tree: cKDTree | None = field(default=None, repr=False)
-    _surface_cells: np.ndarray | None = field(default=None, repr=False)
+    _surface_cells: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
     _free_cells: tuple[GridSpec, np.ndarray, int] | None = field(default=None, repr=False)
 
     @property
@@ -63,25 +63,34 @@ class Probe:
         return dist
 
     def near_surface(self, points_world: np.ndarray) -> np.ndarray:
-        """(N,) bool: `surface_distance(points) <= ghost_dist_m`, exactly, with a search
-        cut short past that distance (the tree keeps neighbours strictly nearer than its
-        bound, so the bound sits a hair above the threshold)."""
+        """(N,) bool: `surface_distance(points) <= ghost_dist_m`, exactly: a point sharing a
+        cell of side ghost_dist/2 with a surface sample (in either of two grids offset by half
+        a cell) passes unasked; the rest are asked with a search cut short past that distance
+        (the tree keeps neighbours strictly nearer than its bound, so the bound sits a hair
+        above the threshold)."""
         limit = self.ev.ghost_dist_m
-        near = in_sorted(voxels.pack(voxels.voxel_indices(points_world, limit / 2)),
-                         self.surface_cells)
+        pts = np.asarray(points_world, np.float64).reshape(-1, 3)
+        near = np.zeros(len(pts), bool)
+        for shift, cells in zip((0.0, limit / 4), self.surface_cells, strict=True):
+            ask = ~near
+            near[ask] = in_sorted(voxels.pack(voxels.voxel_indices(pts[ask] + shift, limit / 2)),
+                                  cells)
         if not near.all():
-            dist, _ = self.surface_tree.query(points_world[~near],
+            dist, _ = self.surface_tree.query(pts[~near],
                                               distance_upper_bound=limit * (1 + 1e-9))
             near[~near] = dist <= limit
         return near
 
     @property
-    def surface_cells(self) -> np.ndarray:
-        """Sorted keys of the cells of side ghost_dist/2 that hold a surface sample: every
-        point of one lies within 0.87·ghost_dist of it, so passes the ghost test unasked."""
+    def surface_cells(self) -> tuple[np.ndarray, np.ndarray]:
+        """Sorted keys of the cells of side ghost_dist/2 that hold a surface sample, in the
+        grid and in the grid offset by half a cell: every point of such a cell lies within
+        0.87·ghost_dist of the sample, so passes the ghost test unasked."""
         if self._surface_cells is None:
-            self._surface_cells = unique_sorted(voxels.pack(voxels.voxel_indices(
-                self.gt.surface_points_world, self.ev.ghost_dist_m / 2)))
+            limit, surface = self.ev.ghost_dist_m, self.gt.surface_points_world
+            self._surface_cells = tuple(
+                unique_sorted(voxels.pack(voxels.voxel_indices(surface + shift, limit / 2)))
+                for shift in (0.0, limit / 4))
         return self._surface_cells
 
     def ghost_point_mask(

@@ -79,9 +79,13 @@ class TruthIndex:
     def around(self, pts: np.ndarray) -> np.ndarray:
         """Indices of the truth points in the cells around `pts` (a superset of those
         within the radius of one of them)."""
-        if len(pts) == 0 or self.buckets.size == 0:
+        return self.around_cells(self.cells_of(pts) if len(pts) else np.zeros(0, np.int64))
+
+    def around_cells(self, cells: np.ndarray) -> np.ndarray:
+        """`around` of points whose `cells_of` is known."""
+        if cells.size == 0 or self.buckets.size == 0:
             return np.zeros(0, np.int64)
-        near = self._neighbourhood(self.cells_of(pts))
+        near = self._neighbourhood(cells)
         if self.dense:
             slots = self.slot[near]
             mark = np.zeros(self.buckets.size, bool)
