@@ -5,7 +5,9 @@ import numpy as np
 from services.common.arrays import (
     column_extremes,
     in_sorted,
+    insert_rows,
     missing_rows_2,
+    row_items,
     union_rows_2,
     unique_first,
     unique_groups,
@@ -68,3 +70,20 @@ def test_unique_groups_equals_numpy() -> None:
         want = np.unique(keys, return_index=True, return_inverse=True, return_counts=True)
         for g, w in zip(got, want, strict=True):
             assert np.array_equal(g, w) and g.dtype == w.dtype, keys[:5]
+
+
+def test_insert_rows_and_row_items_move_whole_rows() -> None:
+    rng = np.random.default_rng(4)
+    for a in (rng.integers(0, 255, (40, 3)).astype(np.uint8), rng.normal(size=(40, 3)),
+              rng.integers(0, 9, 40)):
+        at = np.sort(rng.integers(0, len(a) + 1, 7))
+        rows = a[:7] + 1
+        assert np.array_equal(insert_rows(a, at, rows), np.insert(a, at, rows, axis=0))
+        out = np.zeros_like(a)
+        mask = rng.random(len(a)) < 0.5
+        row_items(out)[mask] = row_items(a[mask].copy())
+        want = np.zeros_like(a)
+        want[mask] = a[mask]
+        assert np.array_equal(out, want)
+        empty = a[:0]
+        assert np.array_equal(insert_rows(empty, np.zeros(2, int), a[:2]), a[:2])

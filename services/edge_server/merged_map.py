@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from services.common.arrays import insert_rows
 from services.common.geometry import transform_points
 from services.common.voxels import centres, pack, unpack, voxel_indices
 from services.edge_server.submap_store import StoredSubmap, SubmapKey, SubmapStore
@@ -102,7 +103,7 @@ def _insert_new(
     inside = pos < keys.size
     known[inside] = keys[pos[inside]] == new_keys[inside]
     new, pos = ~known, pos[~known]
-    merged = [np.insert(v, pos, nv[new], axis=0) for v, nv in zip(values, new_values, strict=True)]
+    merged = [insert_rows(v, pos, nv[new]) for v, nv in zip(values, new_values, strict=True)]
     return np.insert(keys, pos, new_keys[new]), merged, new_keys[new]
 
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from services.common import voxels
-from services.common.arrays import unique_groups, unique_sorted
+from services.common.arrays import row_items, unique_groups, unique_sorted
 from services.common.geometry import invert, wrap_angle, xyyaw_from_T
 from services.robot_agent.config import AgentConfig
 
@@ -101,7 +101,7 @@ class VoxelSubmap:
 
         def spread(a: np.ndarray) -> np.ndarray:
             out = np.zeros((n, *a.shape[1:]), a.dtype)
-            out[old] = a
+            row_items(out)[old] = row_items(np.ascontiguousarray(a))  # whole rows at a time
             return out
 
         keys = spread(self.keys)
