@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy import ndimage
 
 from services.common.grid import GridSpec
 from services.common.planning import (
     astar,
+    disk,
     distance_field,
     distance_fields,
     inflate,
@@ -50,6 +52,19 @@ def test_inflate_and_nearest() -> None:
     assert grown[5, 3] and grown[3, 5] and not grown[3, 3] and grown.sum() == 13
     r, c = nearest_traversable(~grown, (5, 5))
     assert (r - 5) ** 2 + (c - 5) ** 2 == 5  # just outside the radius-2 disk
+
+
+def test_inflate_equals_a_disk_dilation() -> None:
+    """Row-run inflation marks the cells `binary_dilation` by the disk marks: random grids,
+    radii 1-8, grids narrower than the disk, obstacles on the border."""
+    rng = np.random.default_rng(6)
+    for _ in range(200):
+        shape = tuple(int(n) for n in rng.integers(1, 40, 2))
+        occupied = rng.random(shape) < rng.choice([0.005, 0.05, 0.3])
+        occupied[0, -1] = True
+        r = int(rng.integers(1, 9))
+        want = ndimage.binary_dilation(occupied, structure=disk(r))
+        assert np.array_equal(inflate(occupied, r), want)
 
 
 def test_grid_spec_round_trip() -> None:
