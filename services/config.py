@@ -7,6 +7,7 @@ underscores); values are parsed as YAML scalars. CLI overrides are dotted keys
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -50,7 +51,26 @@ class SpacemapConfig(BaseModel):
                                     ("nav_omega_radps", "max_omega_radps")):
             if agent_key in agent and edge_key not in edge:
                 edge[edge_key] = agent[agent_key]
+        sim = tree.get("sim") or {}
+        if isinstance(sim, Mapping):
+            edge.update({k: v for k, v in _camera_of(sim).items() if k not in edge})
         return {**tree, "edge": edge}
+
+
+def _camera_of(sim: Mapping[str, Any]) -> dict[str, float]:
+    """The edge's camera fields from what the sim section sets (its defaults otherwise)."""
+    out: dict[str, float] = {}
+    if "camera_height_m" in sim:
+        out["camera_height_m"] = sim["camera_height_m"]
+    if "range_m" in sim:
+        out["camera_range_m"] = sim["range_m"]
+    if any(k in sim for k in ("hfov_deg", "width", "height")):
+        field = SimConfig.model_fields
+        hfov, w, h = (float(sim.get(k, field[k].default)) for k in ("hfov_deg", "width",
+                                                                      "height"))
+        out["camera_half_vfov_deg"] = math.degrees(math.atan(math.tan(math.radians(hfov) / 2)
+                                                             * h / w))
+    return out
 
 
 def _set_dotted(tree: dict[str, Any], dotted: str, value: Any) -> None:

@@ -80,6 +80,20 @@ class EdgeConfig(BaseModel):
         "shelves one side is not enough); 0: space_reached_final alone")
     space_look_at_region: bool = Field(default=False, description="goals carry the region's "
                                        "centroid: the robot faces it before reporting reached")
+    space_view_goals: bool = Field(
+        default=False, description="an F_u region too high to be seen from beside it gets "
+        "its f′ where the camera sees above it (view_goals.py) and the robot faces it there")
+    space_view_quantile: float = Field(default=0.75, ge=0, le=1, description="a region's "
+                                       "height for its view: this quantile of its voxels'")
+    space_view_margin_m: float = Field(default=0.4, ge=0, description="the view reaches "
+                                       "this far above the region's height")
+    space_view_min_z_m: float = Field(default=0.0, description="only regions at least this "
+                                      "high get a far view")
+    camera_height_m: float = Field(default=0.35, gt=0, description="the robots' camera "
+                                   "(the mission config copies sim.camera_height_m)")
+    camera_half_vfov_deg: float = Field(default=34.0779, gt=0, lt=90, description="vertical "
+                                        "half-FoV (copied from sim's hfov, width, height)")
+    camera_range_m: float = Field(default=5.0, gt=0, description="copied from sim.range_m")
     space_successor_m: float = Field(
         default=0.0, ge=0, description="a robot this close to its goal (m, straight line) "
         "gets its next goal ahead (Goal.queued, successors.py); 0: it waits for the next plan")
@@ -154,6 +168,10 @@ class EdgeConfig(BaseModel):
     keep_radius_m: float = Field(
         default=0.5, ge=0, description="hysteresis: a goal is kept while a frontier lies this close"
     )
+    keep_by_anchor: bool = Field(
+        default=False, description="a goal whose region has the same anchor cell as before is "
+        "kept, even where an F_w region drawn over it took its cells on the label grid (the "
+        "window search alone re-issued one far view every plan: docs/edge.md, \"Far views\")")
     retarget_goals: bool = Field(
         default=False, description="a kept region whose goal cell the robot can no longer reach "
         "(an obstacle seen next to it) but whose new f′ it can: the robot keeps the region and "

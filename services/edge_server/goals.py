@@ -67,6 +67,7 @@ class GoalBook:
         self.blacklist: list[tuple[float, float, int]] = []  # (x, y, expiry tick)
         self.strikes: list[tuple[float, float]] = []  # every bad/reached report's place
         self.looked_from: list[tuple[float, float]] = []  # reached places (space_second_look_m)
+        self.viewed_anchor: dict[int, tuple[float, float]] = {}  # far-view goal → anchor
         self.successors: dict[int, ActiveGoal] = {}  # robot → queued goal last sent
         self.provisional: set[int] = set()  # robots on an adopted successor, not yet re-scored
         self.retarget: set[int] = set()  # robots whose kept region's f′ moved (retarget_goals)
@@ -103,6 +104,10 @@ class GoalBook:
             ticks = FOREVER_TICKS
         if ticks > 0:
             self.blacklist.append((x, y, status.tick + ticks))
+        anchor = self.viewed_anchor.get(status.goal_id)
+        if status.status == "reached" and anchor is not None:
+            # seen from as far back as the camera needed: the region is done from anywhere
+            self.blacklist.append((anchor[0], anchor[1], FOREVER_TICKS))
         current = self.active.get(status.robot_id)
         if current is not None and current.goal_id == status.goal_id:
             log.info("robot %d goal %d %s %s", status.robot_id, status.goal_id, status.status,
@@ -159,6 +164,15 @@ class GoalBook:
                 self.drops["off the grid"] += 1
                 continue
             r, c = rc[0]
+            same = np.flatnonzero((frontiers.anchor_rc[:, 0] == r)
+                                  & (frontiers.anchor_rc[:, 1] == c))
+            if len(same) and self.config.keep_by_anchor:
+                # the region is still there, anchor and all, though an F_w region drawn over
+                # it may have taken every one of its cells on the label grid
+                f = int(same[0])
+                if usable[f] and f not in kept.values() and fields.reaches(robot, grc)[0]:
+                    kept[robot] = f
+                    continue
             # nearest frontier cell to the old anchor: EDT on a window of the keep radius
             r0, c0 = max(r - k, 0), max(c - k, 0)
             window = frontiers.labels[r0 : r + k + 1, c0 : c + k + 1]
@@ -332,8 +346,13 @@ class GoalBook:
         self.issued[goal_id] = (goal_xy[0], goal_xy[1], weak)
         anchor_xy = (float(frontiers.anchor_xy[f, 0]), float(frontiers.anchor_xy[f, 1]))
         look = None
-        if self.config.planner == "space" and self.config.space_look_at_region:
+        view = frontiers.view is not None and bool(frontiers.view[f])
+        if view or (self.config.planner == "space" and self.config.space_look_at_region):
             look = (float(frontiers.centroid_xy[f, 0]), float(frontiers.centroid_xy[f, 1]))
+        if view:
+            self.viewed_anchor[goal_id] = anchor_xy
+            log.info("robot %d goal %d: a far view at (%.2f, %.2f) of the region at (%.2f, "
+                     "%.2f)", robot, goal_id, *goal_xy, *anchor_xy)
         goal = Goal(robot_id=robot, tick=tick, goal_id=goal_id, x=goal_xy[0], y=goal_xy[1],
                     frontier_class="weak" if weak else "unexplored", revenue=score,
                     look_xy=look)

@@ -199,7 +199,7 @@ class EdgePlanner:
         cfg, spec = self.config, snap.spec
         if cfg.planner in SPACE_PLANNERS:
             fs, _ = detect_spatial_frontiers(self.merged, snap.known, reachable, spec, cfg,
-                                             self._point_frontiers(), goal_edt)
+                                             self._point_frontiers(), goal_edt, snap.free)
             # F_w regions already seen from close by are not worth a trip (completion.py)
             fs = subset(fs, ~(fs.weak & self.visits.seen(fs.centroid_xy)))
             imp = importance(tick * self.tick_s, robot_xy, fs.centroid_xy, fs.weak,

@@ -33,6 +33,7 @@ from services.edge_server.frontiers3d import (
     point_entropy,
 )
 from services.edge_server.merged_map import MergedMap
+from services.edge_server.view_goals import ViewGeometry, region_top_z, view_goals
 
 
 def subset(fs: FrontierSet, keep: np.ndarray) -> FrontierSet:
@@ -41,7 +42,7 @@ def subset(fs: FrontierSet, keep: np.ndarray) -> FrontierSet:
     renumber[1:][keep] = np.arange(1, int(keep.sum()) + 1, dtype=np.int32)
     pick = {name: (getattr(fs, name)[keep] if getattr(fs, name) is not None else None)
             for name in ("sizes", "centroid_xy", "anchor_rc", "anchor_xy", "goal_rc", "goal_xy",
-                         "weak", "gain", "importance", "centroid_z", "grid_frontier_m")}
+                         "weak", "gain", "importance", "centroid_z", "grid_frontier_m", "view")}
     return FrontierSet(labels=renumber[fs.labels], dropped_unreachable=fs.dropped_unreachable,
                        **pick)
 
@@ -51,17 +52,24 @@ def concat(a: FrontierSet, b: FrontierSet) -> FrontierSet:
     labels = np.where(b.labels > 0, b.labels + len(a), a.labels).astype(np.int32)
     fields = {}
     for name in ("sizes", "centroid_xy", "anchor_rc", "anchor_xy", "goal_rc", "goal_xy",
-                 "weak", "gain", "importance", "centroid_z"):
-        fields[name] = np.concatenate([getattr(a, name), getattr(b, name)])
+                 "weak", "gain", "importance", "centroid_z", "view"):
+        fields[name] = np.concatenate([_or_zeros(a, name), _or_zeros(b, name)])
     return FrontierSet(labels=labels, dropped_unreachable=a.dropped_unreachable
                        + b.dropped_unreachable, **fields)
 
 
+def _or_zeros(fs: FrontierSet, name: str) -> np.ndarray:
+    value = getattr(fs, name)
+    return np.zeros(len(fs), bool) if value is None and name == "view" else value
+
+
 def class_regions(
     pf: PointFrontiers, weak: bool, goal_ok: np.ndarray, spec: GridSpec, config: EdgeConfig,
-    goal_edt: GoalTransform | None = None,
+    goal_edt: GoalTransform | None = None, see_through: np.ndarray | None = None,
 ) -> FrontierSet:
-    """Regions of one class with |V_f|, I_g, 3D centroid and goals f′."""
+    """Regions of one class with |V_f|, I_g, 3D centroid and goals f′ (F_u regions too high
+    to see from beside them: a far view, when `see_through`, the known free cells, is given
+    and `space_view_goals` is on)."""
     mask = (pf.weak if weak else pf.unexplored) & (pf.points_world[:, 2] <= config.frontier_z_max_m)
     sel = np.flatnonzero(mask)
     rc = spec.cell_of(pf.points_world[sel, :2])
@@ -83,12 +91,25 @@ def class_regions(
     gain = np.bincount(lab, point_entropy(pf, weak, sel), n) / denom
     z = np.bincount(lab, pf.points_world[sel, 2], n) / denom
     xy = np.stack([np.bincount(lab, pf.points_world[sel, d], n) for d in (0, 1)], 1)
+    goal_rc, view = fs.goal_rc, np.zeros(n, bool)
+    if (see_through is not None and not weak and config.space_view_goals
+            and config.planner == "space" and n):  # space-paper: the paper's f′
+        top = region_top_z(lab, pf.points_world[sel, 2], n, config.space_view_quantile)
+        top = np.where(top >= config.space_view_min_z_m, top, np.nan)
+        goal_rc, view = view_goals(fs.anchor_rc, fs.goal_rc, top, see_through, goal_ok, spec,
+                                   view_geometry(config))
     fs = FrontierSet(labels=fs.labels, sizes=count, centroid_xy=xy / denom[:, None],
-                     anchor_rc=fs.anchor_rc, anchor_xy=fs.anchor_xy, goal_rc=fs.goal_rc,
-                     goal_xy=fs.goal_xy, dropped_unreachable=fs.dropped_unreachable,
-                     weak=np.full(n, weak), gain=gain, importance=np.ones(n), centroid_z=z)
+                     anchor_rc=fs.anchor_rc, anchor_xy=fs.anchor_xy, goal_rc=goal_rc,
+                     goal_xy=spec.centre_of(goal_rc), dropped_unreachable=fs.dropped_unreachable,
+                     weak=np.full(n, weak), gain=gain, importance=np.ones(n), centroid_z=z,
+                     view=view)
     min_voxels = config.weak_min_voxels if weak else config.unexplored_min_voxels
     return subset(fs, count >= min_voxels)
+
+
+def view_geometry(config: EdgeConfig) -> ViewGeometry:
+    return ViewGeometry(config.camera_height_m, np.radians(config.camera_half_vfov_deg),
+                        config.camera_range_m, config.space_view_margin_m)
 
 
 def near_unknown(fs: FrontierSet, known: np.ndarray, spec: GridSpec, max_m: float) -> np.ndarray:
@@ -114,9 +135,11 @@ def near_unknown(fs: FrontierSet, known: np.ndarray, spec: GridSpec, max_m: floa
 def detect_spatial_frontiers(
     merged: MergedMap, known: np.ndarray, goal_ok: np.ndarray, spec: GridSpec,
     config: EdgeConfig, pf: PointFrontiers | None = None, goal_edt: GoalTransform | None = None,
+    see_through: np.ndarray | None = None,
 ) -> tuple[FrontierSet, PointFrontiers]:
     """F_u regions then F_w regions of P*, with gains and goals (importance still 1).
-    `pf`: Alg. 1's output when the caller keeps it incrementally (frontier_cache.py)."""
+    `pf`: Alg. 1's output when the caller keeps it incrementally (frontier_cache.py);
+    `see_through`: the known free cells, for far views of high F_u regions."""
     args = (config.frontier_voxel_m, config.search_radius_m, config.density_threshold,
             config.variance_threshold_m2)
     if pf is None and np.isclose(merged.voxel_m, config.frontier_voxel_m):  # on the ϱ lattice
@@ -125,7 +148,7 @@ def detect_spatial_frontiers(
         pf = detect_point_frontiers(merged.points_world, *args)
     if not len(pf.rho) or not goal_ok.any():
         return _typed_empty(spec), pf
-    unexplored = class_regions(pf, False, goal_ok, spec, config, goal_edt)
+    unexplored = class_regions(pf, False, goal_ok, spec, config, goal_edt, see_through)
     unexplored = subset(unexplored, near_unknown(unexplored, known, spec,
                                                  config.unexplored_unknown_m))
     weak = class_regions(pf, True, goal_ok, spec, config, goal_edt)

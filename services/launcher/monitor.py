@@ -223,7 +223,7 @@ class Monitor:
             t.events.append({"tick": msg.tick, "kind": "goal", "goal_id": msg.goal_id,
                              "x": msg.x, "y": msg.y, "frontier_class": msg.frontier_class,
                              "revenue": msg.revenue, "cancel": msg.cancel,
-                             "queued": msg.queued})
+                             "queued": msg.queued, "look_xy": msg.look_xy})
         elif isinstance(msg, m.GoalStatus) and msg.robot_id in self.tracks:
             t = self.tracks[msg.robot_id]
             t.goal_statuses[msg.status] += 1
