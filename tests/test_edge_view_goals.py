@@ -162,3 +162,21 @@ def test_a_goal_is_kept_while_its_region_keeps_its_anchor_under_a_weak_one(
         assert second.assigned == {0: 0} and second.new_goals == []
     else:  # the window search finds no cell of region 0 within the keep radius
         assert book.drops["region gone"] == 1
+
+
+def test_the_edge_takes_the_camera_from_the_sim_section_unless_it_sets_its_own() -> None:
+    from services.config import load_config
+    from services.evaluator.world_truth import eval_config_for
+
+    config = load_config(overrides={"sim.hfov_deg": 90.0, "sim.camera_height_m": 0.5,
+                                    "sim.range_m": 4.0})
+    assert config.edge.camera_height_m == 0.5
+    assert config.edge.camera_range_m == 4.0
+    # the same vertical half-FoV the evaluator's observable truth uses
+    assert config.edge.camera_half_vfov_deg == pytest.approx(
+        eval_config_for(config.sim).max_elevation_deg)
+    default = load_config()
+    assert default.edge.camera_half_vfov_deg == pytest.approx(
+        eval_config_for(default.sim).max_elevation_deg, abs=1e-3)
+    own = load_config(overrides={"sim.camera_height_m": 0.5, "edge.camera_height_m": 0.3})
+    assert own.edge.camera_height_m == 0.3
