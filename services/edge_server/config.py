@@ -47,6 +47,10 @@ class EdgeConfig(BaseModel):
     unexplored_unknown_m: float = Field(
         default=0.5, ge=0, description="an F_u region is worth visiting only this close (xy) to "
         "unknown space on the merged grid; edges of what a camera can ever see are not")
+    floor_rim_z_m: float | None = Field(
+        default=None, description="F_u regions whose mean height is at most this are kept "
+        "however far from unknown grid cells: the unseen floor inside rooms the grid already "
+        "calls free (None: every F_u region must be near unknown space)")
     frontier_z_max_m: float = Field(default=1.5, description="voxels above are never frontiers")
     goal_max_offset_3d_m: float = Field(default=1.5, ge=0, description="f′ offset for 3D regions")
     # importance and revenue
@@ -89,6 +93,9 @@ class EdgeConfig(BaseModel):
                                        "this far above the region's height")
     space_view_min_z_m: float = Field(default=0.0, description="only regions at least this "
                                       "high get a far view")
+    space_view_split: bool = Field(
+        default=False, description="F_u voxels at or above space_view_min_z_m form regions of "
+        "their own, kept only where a far view of them exists")
     camera_height_m: float = Field(default=0.35, gt=0, description="the robots' camera "
                                    "(the mission config copies sim.camera_height_m)")
     camera_half_vfov_deg: float = Field(default=34.0779, gt=0, lt=90, description="vertical "

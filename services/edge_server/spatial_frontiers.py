@@ -67,10 +67,31 @@ def class_regions(
     pf: PointFrontiers, weak: bool, goal_ok: np.ndarray, spec: GridSpec, config: EdgeConfig,
     goal_edt: GoalTransform | None = None, see_through: np.ndarray | None = None,
 ) -> FrontierSet:
-    """Regions of one class with |V_f|, I_g, 3D centroid and goals f′ (F_u regions too high
-    to see from beside them: a far view, when `see_through`, the known free cells, is given
-    and `space_view_goals` is on)."""
-    mask = (pf.weak if weak else pf.unexplored) & (pf.points_world[:, 2] <= config.frontier_z_max_m)
+    """Regions of one class with |V_f|, I_g, 3D centroid and goals f′. F_u regions too high
+    to see from beside them get a far view when `see_through` (the known free cells) is given
+    and `space_view_goals` is on; with `space_view_split` the F_u voxels at or above
+    `space_view_min_z_m` form regions of their own, kept only where a far view exists."""
+    z = pf.points_world[:, 2]
+    mask = (pf.weak if weak else pf.unexplored) & (z <= config.frontier_z_max_m)
+    views = (see_through is not None and not weak and config.space_view_goals
+             and config.planner == "space")  # space-paper: the paper's f′
+    if not views:
+        return _regions(pf, mask, weak, goal_ok, spec, config, goal_edt)
+    assert see_through is not None
+    if not config.space_view_split:
+        return _regions(pf, mask, weak, goal_ok, spec, config, goal_edt, see_through)
+    high = z >= config.space_view_min_z_m
+    low_fs = _regions(pf, mask & ~high, weak, goal_ok, spec, config, goal_edt)
+    high_fs = _regions(pf, mask & high, weak, goal_ok, spec, config, goal_edt, see_through)
+    assert high_fs.view is not None
+    return concat(low_fs, subset(high_fs, high_fs.view))
+
+
+def _regions(
+    pf: PointFrontiers, mask: np.ndarray, weak: bool, goal_ok: np.ndarray, spec: GridSpec,
+    config: EdgeConfig, goal_edt: GoalTransform | None, see_through: np.ndarray | None = None,
+) -> FrontierSet:
+    """Regions of the voxels in `mask` (far views where `see_through` is given)."""
     sel = np.flatnonzero(mask)
     rc = spec.cell_of(pf.points_world[sel, :2])
     inside = spec.contains(rc)
@@ -92,8 +113,7 @@ def class_regions(
     z = np.bincount(lab, pf.points_world[sel, 2], n) / denom
     xy = np.stack([np.bincount(lab, pf.points_world[sel, d], n) for d in (0, 1)], 1)
     goal_rc, view = fs.goal_rc, np.zeros(n, bool)
-    if (see_through is not None and not weak and config.space_view_goals
-            and config.planner == "space" and n):  # space-paper: the paper's f′
+    if see_through is not None and n:
         top = region_top_z(lab, pf.points_world[sel, 2], n, config.space_view_quantile)
         top = np.where(top >= config.space_view_min_z_m, top, np.nan)
         goal_rc, view = view_goals(fs.anchor_rc, fs.goal_rc, top, see_through, goal_ok, spec,
@@ -149,8 +169,13 @@ def detect_spatial_frontiers(
     if not len(pf.rho) or not goal_ok.any():
         return _typed_empty(spec), pf
     unexplored = class_regions(pf, False, goal_ok, spec, config, goal_edt, see_through)
-    unexplored = subset(unexplored, near_unknown(unexplored, known, spec,
-                                                 config.unexplored_unknown_m))
+    keep = near_unknown(unexplored, known, spec, config.unexplored_unknown_m)
+    if config.floor_rim_z_m is not None and len(unexplored):
+        # the rim of the floor the cameras returned: a ToF camera at 0.35 m gets no floor
+        # beyond ~2 m (grazing), yet the grid calls it free up to the walls it saw
+        assert unexplored.centroid_z is not None
+        keep |= unexplored.centroid_z <= config.floor_rim_z_m
+    unexplored = subset(unexplored, keep)
     weak = class_regions(pf, True, goal_ok, spec, config, goal_edt)
     return concat(unexplored, weak), pf
 
