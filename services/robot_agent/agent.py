@@ -114,6 +114,8 @@ class AgentCore:
         self.back_end = _back_end(config, robot_id)
         self.n_frames = 0
         self.view_hidden = False  # the last frame was too hidden by teammates to register
+        self.hidden_hold_ticks = 0  # ticks the current turn in place was held for it
+        self.tick_s = tick_s
         self.nav = Navigator(config, tick_s)
         self.teammates: dict[int, RobotPose] = {}
         self.teammates_prev: dict[int, RobotPose] = {}  # the one before, for the velocity
@@ -235,6 +237,7 @@ class AgentCore:
         if self.nav.state == "idle" and self.view_hidden and \
                 not self.config.idle_spin_when_hidden:
             cmd = Command(0.0, 0.0)  # a turn no frame can register: hold still
+        cmd = self._hold_hidden_turn(cmd)
         if self.n_frames == 0:
             # Still until the first frame anchors the map: odometry drifts only with motion, and
             # the yaw it lost in a first spin (0.1-0.5 deg) would rotate the whole map.
@@ -244,6 +247,19 @@ class AgentCore:
         events += [event] if event is not None else []
         self._adopt_queued(events)
         return self._outputs(odom, pose_world, deltas, events, cmd)
+
+    def _hold_hidden_turn(self, cmd: Command) -> Command:
+        """No command while a turn in place would go unregistered behind teammates, for at
+        most `hidden_turn_hold_s` per turn (two robots hiding each other's view both turn
+        after it)."""
+        turning = self.view_hidden and cmd.v_mps == 0.0 and cmd.omega_radps != 0.0
+        if not turning:
+            self.hidden_hold_ticks = 0
+            return cmd
+        if self.hidden_hold_ticks * self.tick_s >= self.config.hidden_turn_hold_s:
+            return cmd
+        self.hidden_hold_ticks += 1
+        return Command(0.0, 0.0)
 
     def _adopt_queued(self, events: list[StatusEvent]) -> None:
         """The edge's successor becomes the goal (next tick) when this tick ended the last."""

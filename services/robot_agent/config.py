@@ -266,6 +266,12 @@ class AgentConfig(BaseModel):
         default=False, description="spin while idle even when teammates hide the view (False: "
         "hold still while the last frame was too hidden to register: the turn would go "
         "unregistered and odometry's turn error would stay in the map)")
+    hidden_turn_hold_s: float = Field(
+        default=0.0, ge=0, description="hold a turn in place for up to this long (s) while the "
+        "last frame was too hidden by teammates to register, so the turn is registered once "
+        "they pass (0 = never hold): a turn on odometry alone ends 1-1.5° off, and the first "
+        "frame after it registers into half-seen ground (docs/agent.md, \"Turns behind "
+        "teammates\")")
     spin_before_first_goal: bool = Field(
         default=True, description="spin while idle before the first goal too (False: hold "
         "still: robots that start side by side see mostly teammates, so the turn goes "
