@@ -67,3 +67,24 @@ def test_a_frame_the_map_cannot_register_keeps_the_frames_heading() -> None:
         assert out.accepted == (scan is not None) and (scan or out.reason == "not converged")
         errors[scan is not None] = abs(math.degrees(xyyaw_from_T(invert(T1) @ out.T_loc_base)[2]))
     assert errors[False] > 0.79 and errors[True] < 0.05
+
+
+def test_a_turn_behind_teammates_keeps_the_frames_heading_where_asked() -> None:
+    """Frames too hidden to register against the map (the DRF took most of them) are left out
+    of it; with `when_hidden` their remains still give the turn, so a turn behind teammates
+    does not carry odometry's error (1-1.5° in six-robot missions)."""
+    hall = _hall(np.random.default_rng(7))
+    poses = [T_from_xyyaw(0.1, 0.2, math.radians(9.0 * k)) for k in range(5)]
+    odoms = [T_from_xyyaw(0.1, 0.2, math.radians(9.3 * k)) for k in range(5)]  # 3.3 % long
+    errors = {}
+    for when_hidden in (False, True):
+        loc = Localizer(RegistrationParams(min_points=30, filter=FilterParams(),
+                                           scan_odometry=ScanOdometryParams(
+                                               when_hidden=when_hidden)))
+        out = loc.update(_camera_view(hall, poses[0]), odoms[0])
+        for T, odom in zip(poses[1:], odoms[1:], strict=True):
+            out = loc.update(_camera_view(hall, T), odom, removed_frac=0.6)
+            assert not out.accepted and out.reason == "hidden by teammates"
+        assert loc.registrar.n_inserted == 1  # nothing hidden joins the map
+        errors[when_hidden] = abs(math.degrees(xyyaw_from_T(invert(poses[-1]) @ out.T_loc_base)[2]))
+    assert errors[False] > 1.1 and errors[True] < 0.1

@@ -108,6 +108,10 @@ class AgentConfig(BaseModel):
     reg_scan_sigma_rad: float = Field(
         default=0.0025, gt=0, description="with reg_scan_heading: σ of that heading change per "
         "frame, rad")
+    reg_scan_when_hidden: bool = Field(
+        default=False, description="with reg_scan_heading: frames too hidden by teammates to "
+        "register against the map still give the turn from the previous frame (what the DRF "
+        "left of them), so a turn behind teammates is not on odometry alone")
     reg_wall_heading: bool = Field(
         default=True, description="an absolute heading from the directions of the walls in "
         "each frame, modulo 90°, against the world's direction learned from the first frames "

@@ -89,7 +89,11 @@ class Localizer:
         T_odom_base = self._calibrated(T_odom_base)
         hidden = (removed_frac > self.registrar.params.max_removed_frac
                   and self.registrar.n_inserted > 0)
-        frame = None if hidden or filt is None else self.registrar.cloud_tree(points_base)
+        # a hidden frame still gives the turn from the previous one, where asked: what the
+        # teammates leave of two consecutive frames overlaps as much as the teammates do not
+        scan_hidden = hidden and self.scans is not None and self.scans.params.when_hidden
+        frame = (None if (hidden and not scan_hidden) or filt is None
+                 else self.registrar.cloud_tree(points_base))
         if filt is not None and self._T_odom_prev is not None:
             T_prev = self.T_loc_odom @ self._T_odom_prev
             T_odom_base, filt_step = self._scan_turn(frame, T_odom_base, filt)
@@ -98,7 +102,7 @@ class Localizer:
         elif self.scans is not None and frame is not None:
             self.scans.turn(*frame, T_odom_base)  # the first frame: remembered only
         guess = self.T_loc_odom @ T_odom_base
-        if self.walls is not None and frame is not None:
+        if self.walls is not None and frame is not None and not hidden:
             guess = self._wall_heading(frame[0], guess, T_odom_base)
         self._T_odom_prev = T_odom_base.copy()
         if hidden:

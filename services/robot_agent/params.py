@@ -41,7 +41,8 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
                                       prior_segments=cfg.odom_calibration_prior_segments,
                                       fleet_weight=cfg.odom_calibration_fleet_weight)
         if cfg.odom_calibration else None,
-        scan_odometry=ScanOdometryParams(sigma_rad=cfg.reg_scan_sigma_rad)
+        scan_odometry=ScanOdometryParams(sigma_rad=cfg.reg_scan_sigma_rad,
+                                         when_hidden=cfg.reg_scan_when_hidden)
         if cfg.reg_scan_heading else None,
         wall_heading=WallHeadingParams(min_points=cfg.reg_wall_min_points,
                                        sigma_rad=cfg.reg_wall_sigma_rad,

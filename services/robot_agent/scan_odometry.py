@@ -33,6 +33,8 @@ class ScanOdometryParams:
     gate_rad: float = 0.01
     gate_rad_per_rad: float = 0.05
     sigma_rad: float = 0.0025  # its σ per frame step
+    # frames too hidden by teammates to register against the map still give the turn
+    when_hidden: bool = False
 
 
 @dataclass
