@@ -199,3 +199,24 @@ def test_a_turn_in_place_waits_while_teammates_hide_the_view() -> None:
                             (AgentConfig(), 0.9)):
         cmds = _turn_cmds(AgentCore(config, 0, 0.1), removed, 4)
         assert any(c.omega_radps != 0.0 for c in cmds[:3])
+
+
+def test_driving_behind_teammates_is_held_only_where_asked() -> None:
+    """`hidden_hold_driving` holds driving too while the view is hidden; without it only turns
+    in place wait."""
+    moved = {}
+    for hold_driving in (False, True):
+        core = AgentCore(AgentConfig(hidden_turn_hold_s=2.0, hidden_hold_driving=hold_driving),
+                         0, 0.1)
+        core.on_rgbd(_frame(0, (0.0, 0.0, 0.0)))
+        core.on_odometry(_odom(0, (0.0, 0.0, 0.0)))
+        core._drf_removed_frac = lambda frame: 0.9
+        core.on_goal(Goal(robot_id=0, tick=1, goal_id=4, x=3.0, y=0.0,  # straight ahead
+                          frontier_class="unexplored", revenue=1.0))
+        cmds = []
+        for k in range(1, 12):
+            if k % 2 == 0:
+                core.on_rgbd(_frame(k, (0.0, 0.0, 0.0)))
+            cmds.append(core.on_odometry(_odom(k, (0.0, 0.0, 0.0)))[-1].message)
+        moved[hold_driving] = [c.v_mps > 0.0 for c in cmds[2:]]
+    assert all(moved[False]) and not any(moved[True])

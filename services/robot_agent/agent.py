@@ -249,11 +249,12 @@ class AgentCore:
         return self._outputs(odom, pose_world, deltas, events, cmd)
 
     def _hold_hidden_turn(self, cmd: Command) -> Command:
-        """No command while a turn in place would go unregistered behind teammates, for at
-        most `hidden_turn_hold_s` per turn (two robots hiding each other's view both turn
-        after it)."""
-        turning = self.view_hidden and cmd.v_mps == 0.0 and cmd.omega_radps != 0.0
-        if not turning:
+        """No command while a turn in place (and, with `hidden_hold_driving`, any motion)
+        would go unregistered behind teammates, for at most `hidden_turn_hold_s` at a time
+        (two robots hiding each other's view both move on after it)."""
+        moving = (cmd.v_mps != 0.0 and self.config.hidden_hold_driving) or (
+            cmd.v_mps == 0.0 and cmd.omega_radps != 0.0)
+        if not (self.view_hidden and moving):
             self.hidden_hold_ticks = 0
             return cmd
         if self.hidden_hold_ticks * self.tick_s >= self.config.hidden_turn_hold_s:

@@ -276,6 +276,9 @@ class AgentConfig(BaseModel):
         "they pass (0 = never hold): a turn on odometry alone ends 1-1.5° off, and the first "
         "frame after it registers into half-seen ground (docs/agent.md, \"Turns behind "
         "teammates\")")
+    hidden_hold_driving: bool = Field(
+        default=False, description="with hidden_turn_hold_s: driving is held too, not only "
+        "turns in place (along-track, odometry alone runs 2 % long until it is calibrated)")
     spin_before_first_goal: bool = Field(
         default=True, description="spin while idle before the first goal too (False: hold "
         "still: robots that start side by side see mostly teammates, so the turn goes "
