@@ -46,6 +46,7 @@ from schemas.messages import (  # noqa: E402
     RobotPose,
 )
 from services.common.bus import BusConfig, connect  # noqa: E402
+from services.common.geometry import wrap_angle  # noqa: E402
 from services.config import load_config  # noqa: E402
 from services.processes import free_tcp_port  # noqa: E402
 from services.robot_agent import agent as agent_mod  # noqa: E402
@@ -192,6 +193,8 @@ def replay(rec: Path, robot: int, limit: int | None) -> tuple[StageTimer, dict, 
             if limit is not None and n_odom >= limit:
                 break
     mismatches = {t: _mismatch(expected[t], produced[t], limit is not None) for t in OUTPUTS}
+    if mismatches["pose"].startswith("differ"):
+        mismatches["pose"] += _pose_gap(expected["pose"], produced["pose"])
     return timer, mismatches, [f"{t}: {len(produced[t])}" for t in OUTPUTS]
 
 
@@ -222,6 +225,15 @@ def _mismatch(expected: list[bytes], produced: list[bytes], partial: bool) -> st
     if not partial and len(expected) != len(produced):
         return f"{len(produced)} produced, {len(expected)} in the mission"
     return "identical"
+
+
+def _pose_gap(expected: list[bytes], produced: list[bytes]) -> str:
+    """How far the replayed poses stray from the mission's: rounding, or another mission."""
+    pairs = [(decode(a, RobotPose).pose_world, decode(b, RobotPose).pose_world)
+             for a, b in zip(expected, produced, strict=False)]
+    d_m = max(float(np.hypot(a.x - b.x, a.y - b.y)) for a, b in pairs)
+    d_rad = max(abs(float(wrap_angle(a.yaw - b.yaw))) for a, b in pairs)
+    return f" (largest gap {d_m:.2g} m, {d_rad:.2g} rad)"
 
 
 def report(timer: StageTimer) -> None:

@@ -43,7 +43,7 @@ def world_directions(run_dir: Path, robot: int, params: WallHeadingParams) -> np
         frame = registrar.cloud_tree(cam_to_base(cam.points_cam, rec.T_base_cam[robot]))
         d = None
         if frame is not None:
-            d = wall_direction(frame[0].points()[:, :3], np.asarray(frame[0].covs()), params)
+            d = wall_direction(frame[0].points()[:, :3], frame[0].normals()[:, :3], params)
         out.append(np.nan if d is None else float(fold(rec.poses[robot, t, 2] + d.angle_rad)))
     return np.array(out)
 

@@ -18,6 +18,7 @@ from services.robot_agent.wall_heading import (
     WallHeadingParams,
     fold,
     fuse_heading,
+    gicp_covariance_terms,
     team_direction,
     wall_direction,
 )
@@ -39,11 +40,23 @@ def _room(rng: np.random.Generator, noise_m: float = 0.005) -> np.ndarray:
 def _frame(points_world: np.ndarray, xyyaw: tuple[float, float, float],
            ) -> tuple[np.ndarray, np.ndarray]:
     """The points a robot at `xyyaw` sees (all around, 4 m), downsampled as the registrar
-    does: base-frame points (N, 3) and their covariances (N, 3, 3)."""
+    does: base-frame points (N, 3) and their normals (N, 3)."""
     p = transform_points(invert(T_from_xyyaw(*xyyaw)), points_world)
     p = p[np.linalg.norm(p[:, :2], axis=1) < 4.0]
     cloud, _ = small_gicp.preprocess_points(p, 0.08, num_neighbors=10, num_threads=1)
-    return cloud.points()[:, :3], np.asarray(cloud.covs())[:, :3, :3]
+    return cloud.points()[:, :3], cloud.normals()[:, :3]
+
+
+def test_the_covariance_terms_from_normals_are_small_gicps_covariances() -> None:
+    rng = np.random.default_rng(3)
+    pts = np.concatenate([_room(rng), rng.uniform(-2, 2, (300, 3))])
+    cloud, _ = small_gicp.preprocess_points(pts, 0.08, num_neighbors=10, num_threads=1)
+    covs = np.asarray(cloud.covs())[:, :3, :3]
+    cxx, cyy, cxy, czz = gicp_covariance_terms(cloud.normals()[:, :3])
+    for got, want in ((cxx, covs[:, 0, 0]), (cyy, covs[:, 1, 1]), (cxy, covs[:, 0, 1]),
+                      (czz, covs[:, 2, 2])):
+        np.testing.assert_allclose(got, want, atol=1e-12)
+    assert np.ptp(czz) > 0.5  # walls and scattered points: the terms are not all alike
 
 
 def test_a_frame_gives_its_walls_direction_modulo_90_degrees() -> None:

@@ -121,7 +121,7 @@ class Localizer:
         """The guess after the heading the frame's walls give; T_loc_odom takes it up."""
         reacquired = self.walls.n_reacquired
         xyyaw, self.P = self.walls.update(np.array(xyyaw_from_T(guess)), self.P,
-                                          cloud.points()[:, :3], np.asarray(cloud.covs()),
+                                          cloud.points()[:, :3], cloud.normals()[:, :3],
                                           xyyaw_from_T(T_odom_base)[2])
         if self.walls.n_reacquired > reacquired and self.registrar.params.reset_on_wall_reacquire:
             self.registrar.reset()

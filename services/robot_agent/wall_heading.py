@@ -9,8 +9,9 @@ first frames, where its pose is known), a frame's walls give its heading modulo 
 with no history to inherit an error from (the drift-free rotation of Manhattan-frame visual
 odometry: Kim et al., "Linear RGB-D SLAM for planar environments", ECCV 2018).
 
-Per frame: each downsampled point's covariance (small_gicp's, 10 neighbours) restricted to the
-floor plane is a line along a vertical surface when its smaller eigenvalue is a small share of
+Per frame: each downsampled point's covariance (small_gicp's for GICP, 10 neighbours: its
+surface normal n with eigenvalues 1e-3, 1, 1, i.e. I − 0.999·n·nᵀ) restricted to the floor plane
+is a line along a vertical surface when its smaller eigenvalue is a small share of
 the larger; its direction θ (base frame) is folded modulo 90° (e^{4iθ}). The frame's direction
 is their circular mean, refined over the points within `select_rad` of it. On recorded frames
 of three worlds (bench/bench_wall_heading.py) the error against the truth is 0.02-0.1° median,
@@ -29,6 +30,7 @@ import numpy as np
 from services.common.geometry import wrap_angle
 
 QUARTER = np.pi / 2
+GICP_SMALL_EIGENVALUE = 1e-3  # small_gicp's covariance along a point's normal (others 1)
 
 
 @dataclass(frozen=True)
@@ -79,15 +81,26 @@ def fold(angle: np.ndarray | float) -> np.ndarray | float:
     return wrap_angle(4.0 * np.asarray(angle)) / 4.0
 
 
-def wall_direction(points_base: np.ndarray, covs: np.ndarray,
+def gicp_covariance_terms(normals_base: np.ndarray,
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(cxx, cyy, cxy, czz), each (N,), of the covariances small_gicp gives its points for
+    GICP, from their unit normals (N, 3) (zero where a point had too few neighbours: then
+    the identity, as small_gicp sets it). Taken from the normals, an (N, 3) array, because
+    `PointCloud.covs()` builds a list of N 4×4 arrays: 7 % of an agent's CPU."""
+    nx, ny, nz = normals_base[:, 0], normals_base[:, 1], normals_base[:, 2]
+    flat = 1.0 - GICP_SMALL_EIGENVALUE
+    return 1.0 - flat * nx * nx, 1.0 - flat * ny * ny, -flat * nx * ny, 1.0 - flat * nz * nz
+
+
+def wall_direction(points_base: np.ndarray, normals_base: np.ndarray,
                    params: WallHeadingParams) -> WallDirection | None:
-    """The dominant wall direction (mod 90°) of one frame: points (N, 3) and their 3×3
-    covariances (N, 3, 3), base frame; None when too few points lie on vertical surfaces."""
-    cxx, cyy, cxy = covs[:, 0, 0], covs[:, 1, 1], covs[:, 0, 1]
+    """The dominant wall direction (mod 90°) of one frame: points (N, 3) and their unit
+    normals (N, 3), base frame; None when too few points lie on vertical surfaces."""
+    cxx, cyy, cxy, czz = gicp_covariance_terms(normals_base)
     half_tr = 0.5 * (cxx + cyy)
     disc = np.sqrt(np.maximum(half_tr**2 - (cxx * cyy - cxy**2), 0.0))
     large, small = half_tr + disc, half_tr - disc
-    wall = ((small < params.max_linearity * large) & (covs[:, 2, 2] > params.min_vertical * large)
+    wall = ((small < params.max_linearity * large) & (czz > params.min_vertical * large)
             & (points_base[:, 2] > params.min_z_m))
     if np.count_nonzero(wall) < params.min_points:
         return None
@@ -246,12 +259,12 @@ class WallHeading:
         return world, P
 
     def update(self, xyyaw: np.ndarray, P: np.ndarray, points_base: np.ndarray,
-               covs: np.ndarray, yaw_odom: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+               normals_base: np.ndarray, yaw_odom: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
         """(x, y, yaw) and P after this frame's walls (unchanged when they say nothing).
         `yaw_odom`: the frame's odometry heading, against which rejected headings are
         compared for re-acquisition (the estimate itself may jump meanwhile)."""
         self.n_frames += 1
-        direction = wall_direction(points_base, covs, self.params)
+        direction = wall_direction(points_base, normals_base, self.params)
         if direction is None:
             return xyyaw, P
         if self.n_frames <= self.params.learn_frames:
