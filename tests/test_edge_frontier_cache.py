@@ -66,3 +66,21 @@ def test_incremental_obstacle_cells_equal_a_fresh_grid() -> None:
         fresh = MergedGrid(cfg).update(store, merged)
         assert np.array_equal(snap.cells, fresh.cells)
         assert snap.occupied.any()
+
+
+def test_a_map_growing_one_way_reallocates_the_box_a_few_times_only() -> None:
+    # each reallocation copies the whole box (10⁸ cells in the warehouse): a side that grows
+    # takes a margin, so a robot driving 40 m reallocates O(log) times, not every 1.6 m
+    rng = np.random.default_rng(3)
+    inc = IncrementalFrontiers(V, R, DD, DV)
+    keys = np.zeros(0, np.int64)
+    shapes = []
+    for step in range(100):
+        idx = rng.integers(0, 20, size=(200, 3)) + np.array([8 * step, 0, 0])
+        keys = np.union1d(keys, pack(idx))
+        inc.update(keys)
+        shapes.append(tuple(inc.stats.dims))
+    reallocations = sum(a != b for a, b in zip(shapes, shapes[1:], strict=False))
+    assert inc.stats.dims[0] >= 8 * 99 + 20
+    assert reallocations <= 12
+    _check(inc, keys)

@@ -19,6 +19,7 @@ from services.edge_server.ball_sums import MAX_K, pack_fields, unpack_fields
 from services.edge_server.frontiers3d import PointFrontiers, ball_offsets, full_ball_variance
 
 CHUNK_VOX = 32  # the box grows in steps of this many voxels per axis (few reallocations)
+GROW_FRACTION = 4  # ... and a side that grows, by at least this fraction of the box
 
 
 class LatticeStats:
@@ -47,14 +48,20 @@ class LatticeStats:
         return (idx[:, 0] - lo[0]) * s0 + (idx[:, 1] - lo[1]) * s1 + (idx[:, 2] - lo[2])
 
     def _fit(self, idx: np.ndarray) -> None:
-        """Grow the box (snapped to CHUNK_VOX) so every stencil cell of `idx` lies inside."""
+        """Grow the box (snapped to CHUNK_VOX, with a margin) so every stencil cell of `idx`
+        lies inside."""
         idx_lo, idx_hi = column_extremes(idx)
         lo = idx_lo - self.pad
         hi = idx_hi + self.pad + 1
         if self.sums.size and (lo >= self.lo).all() and (hi <= self.lo + self.dims).all():
             return
         if self.sums.size:
-            lo, hi = np.minimum(lo, self.lo), np.maximum(hi, self.lo + self.dims)
+            old_hi = self.lo + self.dims
+            # a side that must grow grows by a quarter of the box too: each growth copies the
+            # whole box (a warehouse's is 10⁷-10⁸ cells), so it must happen a few times only
+            margin = np.maximum(self.dims // GROW_FRACTION, CHUNK_VOX)
+            lo = np.where(lo < self.lo, lo - margin, self.lo)
+            hi = np.where(hi > old_hi, hi + margin, old_hi)
         new_lo = np.floor_divide(lo, CHUNK_VOX) * CHUNK_VOX
         new_dims = -np.floor_divide(-(hi - new_lo), CHUNK_VOX) * CHUNK_VOX
         grown = np.zeros(new_dims, np.int64)
