@@ -25,6 +25,7 @@ from schemas import DecodeError, Keys, decode, encode
 from schemas.arrays import DEFAULT_MAX_ARRAY_BYTES
 from schemas.messages import Message
 from services.common.access import load_credential
+from services.common.inbox import Inbox
 from services.common.tls import TLS_KEY, TlsError, client_tls, is_tls
 
 log = logging.getLogger(__name__)
@@ -187,7 +188,7 @@ class Bus:
         self.session = session
         self.config = config
         self.keys = Keys(config.prefix)
-        self.inbox: queue.Queue[tuple[str, str, bytes | bool, type[Message] | None]] = queue.Queue()
+        self.inbox: Inbox[tuple[str, str, bytes | bool, type[Message] | None]] = Inbox()
         self.dropped: Counter[str] = Counter()
         self.bytes_out: Counter[str] = Counter()
         self._logged: set[tuple[str, str]] = set()
@@ -197,15 +198,17 @@ class Bus:
 
     # -- inbound ---------------------------------------------------------------------------
     def subscribe(self, key_expr: str, model: type[Message],
-                  keep: Callable[[bytes], bool] | None = None) -> None:
+                  keep: Callable[[bytes], bool] | None = None, wake: bool = True) -> None:
         """Queue every message on `key_expr` for `poll` (decoded and validated there);
         `keep`, when given, sees each raw payload on the receive thread first and drops
-        those it returns False for (a cheap sampler of heavy traffic, e.g. cameras)."""
+        those it returns False for (a cheap sampler of heavy traffic, e.g. cameras).
+        `wake=False`: the messages keep their place in the inbox without waking a waiting
+        `poll` (frequent ones the service only needs when something else arrives)."""
 
         def on_sample(sample: zenoh.Sample) -> None:
             payload = sample.payload.to_bytes()
             if keep is None or keep(payload):
-                self.inbox.put(("msg", str(sample.key_expr), payload, model))
+                self.inbox.put(("msg", str(sample.key_expr), payload, model), wake)
 
         self._handles.append(self.session.declare_subscriber(key_expr, _direct(on_sample)))
 

@@ -47,7 +47,7 @@ def _subscribe(bus: Bus) -> None:
     k = bus.keys
     bus.subscribe(k.clock(), Clock)
     bus.subscribe(k.any_robot("submap"), Submap)
-    bus.subscribe(k.any_robot("pose"), RobotPose)
+    bus.subscribe(k.any_robot("pose"), RobotPose, wake=False)  # read at plan time only
     bus.subscribe(k.any_robot("goal_status"), GoalStatus)
     bus.watch_liveliness()
 

@@ -95,10 +95,11 @@ class Monitor:
         bus.subscribe(keys.clock(), m.Clock)
         bus.subscribe(keys.map_grid(), m.OccupancyGrid)
         bus.subscribe(keys.map_frontiers(), m.Frontiers)
-        bus.subscribe(keys.any_robot("pose"), m.RobotPose)
+        # every robot's two poses per tick wait for the next clock to be handled
+        bus.subscribe(keys.any_robot("pose"), m.RobotPose, wake=False)
         bus.subscribe(keys.any_robot("goal"), m.Goal)
         bus.subscribe(keys.any_robot("goal_status"), m.GoalStatus)
-        bus.subscribe(keys.gt_pose("*"), m.GtPose)
+        bus.subscribe(keys.gt_pose("*"), m.GtPose, wake=False)
         if camera_every_ticks > 0:
             def keep(payload: bytes) -> bool:  # an undecodable tick goes on, to be refused
                 tick = peek_tick(payload)
