@@ -43,7 +43,7 @@ from services.simulator.odometry import WheelOdometry  # noqa: E402
 
 
 def replay(rec, robot: int, cfg: AgentConfig, sim_cfg, loop: dict, back_end_on: bool):
-    odom = WheelOdometry(tuple(rec.poses[robot, 0]), odometry_noise(sim_cfg),
+    odom = WheelOdometry(tuple(rec.poses[robot, 0]), odometry_noise(sim_cfg, robot),
                          np.random.default_rng([sim_cfg.seed, 2, robot]))
     loc = Localizer(registration_params(cfg))
     mapper = KeyframeMapper(cfg)

@@ -123,7 +123,7 @@ def replay(rec: Recording, robot: int, cfg: AgentConfig, sim_cfg, poses_true: bo
 
     `odom_draw` 0 drifts the odometry as in the mission; k > 0 is the k-th other random draw
     of the same noise model (more trials from one rendered run)."""
-    noise = odometry_noise(sim_cfg)
+    noise = odometry_noise(sim_cfg, robot)
     spawn = tuple(rec.poses[robot, 0])
     seed = [sim_cfg.seed, 2, robot] + ([odom_draw] if odom_draw else [])
     odom = WheelOdometry(spawn, noise, np.random.default_rng(seed))

@@ -39,7 +39,7 @@ def heading_errors(run_dir: Path, robot: int) -> np.ndarray:
     sim_cfg = RunConfig.read(run_dir / "config.yaml").sim
     rec = load_or_record(run_dir)
     spawn = tuple(rec.poses[robot, 0])
-    odom = WheelOdometry(spawn, odometry_noise(sim_cfg),
+    odom = WheelOdometry(spawn, odometry_noise(sim_cfg, robot),
                          np.random.default_rng([sim_cfg.seed, 2, robot]))
     registrar = FrameRegistrar(registration_params(cfg))
     scans = ScanOdometry(ScanOdometryParams())

@@ -144,8 +144,9 @@ def test_the_localizer_learns_the_scale_of_wheels_that_over_read() -> None:
     assert abs(guess[0] - (true[0] + 1.0)) < 0.02
 
 
-def _segments(seed: int, n: int) -> list:
-    """Segments of a wheel with the simulator's errors, registrations 1 cm / 0.2° noisy."""
+def _segments(seed: int, n: int, scale: float = 0.02) -> list:
+    """Segments of a wheel with the simulator's errors (distance `scale` long),
+    registrations 1 cm / 0.2° noisy."""
     from services.robot_agent.odometry_calibration import segment_between
 
     rng = np.random.default_rng(seed)
@@ -154,10 +155,11 @@ def _segments(seed: int, n: int) -> list:
         d, turn = rng.uniform(0.5, 2.0), rng.uniform(-1.0, 1.0)
         reg_to = np.array([d * math.cos(turn / 2), d * math.sin(turn / 2), turn])
         odom_turn = turn * 1.01 + 0.005 * d
-        odom_to = np.array([1.02 * reg_to[0], 1.02 * reg_to[1], odom_turn])
+        k = 1.0 + scale
+        odom_to = np.array([k * reg_to[0], k * reg_to[1], odom_turn])
         noisy = reg_to + rng.normal(0, [0.01, 0.01, 0.0035])
         out.append(segment_between(np.zeros(3), odom_to, np.zeros(3), noisy, odom_turn,
-                                   1.02 * d, 1.02 * d, abs(odom_turn)))
+                                   k * d, k * d, abs(odom_turn)))
     return out
 
 
@@ -195,6 +197,38 @@ def test_a_fleet_pool_counts_teammates_segments_as_its_own() -> None:
     newcomer = Calibration(params)
     newcomer.set_fleet(theirs.own_stats())
     assert newcomer.errors.scale == pytest.approx(0.02, abs=0.004)
+
+
+def test_a_fleet_prior_starts_a_robot_on_the_fleets_wheels_and_yields_to_its_own() -> None:
+    """With fleet_prior_segments, a robot with no segment drives on its teammates' fit; one
+    whose wheels differ (1 % long against the fleet's 3 %) ends near its own as its segments
+    outnumber the prior, where full pooling keeps it on the fleet's."""
+    from services.robot_agent.odometry_calibration import Calibration
+
+    fleet = Calibration(CalibrationParams(min_segments_for_outliers=10**6))
+    for seg in _segments(2, 60, scale=0.03):
+        fleet.add(seg)
+    hier = CalibrationParams(fleet_prior_segments=8.0, min_segments_for_outliers=10**6)
+    newcomer = Calibration(hier)
+    newcomer.set_fleet(fleet.own_stats())
+    for got, want in ((newcomer.errors.scale, fleet.errors.scale),
+                      (newcomer.errors.turn_scale, fleet.errors.turn_scale),
+                      (newcomer.errors.heading_bias_rad_per_m,
+                       fleet.errors.heading_bias_rad_per_m)):
+        assert got == pytest.approx(want, rel=1e-9, abs=1e-12)
+    assert Calibration(hier).shared() is not None
+    prior, pooled = Calibration(hier), Calibration(
+        CalibrationParams(fleet_weight=1.0, min_segments_for_outliers=10**6))
+    for cal in (prior, pooled):
+        cal.set_fleet(fleet.own_stats())
+    for k, seg in enumerate(_segments(3, 80, scale=0.01)):
+        prior.add(seg)
+        pooled.add(seg)
+        if k == 3:  # a few segments: still near the fleet's
+            assert prior.errors.scale > 0.02
+    assert prior.errors.scale == pytest.approx(0.01, abs=0.003)
+    assert pooled.errors.scale > 0.015
+    assert prior.errors.turn_scale == pytest.approx(0.01, abs=0.004)
 
 
 def _stats_of(params: CalibrationParams, seg: object) -> np.ndarray:

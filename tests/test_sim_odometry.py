@@ -58,3 +58,19 @@ def test_simulation_odometry_starts_at_spawn_and_drifts() -> None:
     odom_x = sim.odometry(0).pose[0] - 1.0
     assert true_x > 1.9
     assert odom_x == pytest.approx(1.05 * true_x, rel=1e-3)
+
+
+def test_robots_wheels_differ_by_the_configured_spread_and_by_nothing_without_it() -> None:
+    from services.simulator.core import odometry_noise
+
+    same = SimConfig(seed=3)
+    assert {odometry_noise(same, i) for i in range(4)} == {odometry_noise(same)}
+    assert odometry_noise(same, 2).scale_error == same.odom_scale_error
+    spread = SimConfig(seed=3, odom_error_spread=0.25)
+    wheels = [odometry_noise(spread, i) for i in range(200)]
+    scales = np.array([w.scale_error for w in wheels]) / spread.odom_scale_error
+    assert len({w.scale_error for w in wheels}) == 200
+    assert np.mean(scales) == pytest.approx(1.0, abs=0.06)
+    assert np.std(scales) == pytest.approx(0.25, rel=0.15)
+    assert odometry_noise(spread, 7) == odometry_noise(SimConfig(seed=3, odom_error_spread=0.25), 7)
+    assert odometry_noise(spread, 7) != odometry_noise(SimConfig(seed=4, odom_error_spread=0.25), 7)

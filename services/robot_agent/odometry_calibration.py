@@ -23,6 +23,12 @@ registrations are too weak to end one) drives on the fleet's estimate instead of
 odometry. 1 pools them fully (the same wheels); each agent's sums hold its own segments only,
 so no evidence is counted twice.
 
+Where robots' wheels differ, pooling fully hands every robot the fleet's mean. With
+`fleet_prior_segments` > 0 the teammates' pooled fit is instead the centre of the prior, which
+then weighs that many unit segments more than the "no error" one did: a robot with no segment
+of its own drives on the fleet's estimate, and its own segments take over as they outnumber
+the prior (a hierarchical model: the fleet's wheels as the prior of each robot's).
+
 Pure: numpy in, numpy out; the state is a small accumulator.
 """
 
@@ -56,6 +62,8 @@ class CalibrationParams:
     min_inlier_frac: float = 0.7
     max_weak_ratio: float = 10.0
     fleet_weight: float = 0.0  # teammates' segments count this much each (0: own only)
+    # the teammates' pooled fit is a prior worth this many unit segments (0: none)
+    fleet_prior_segments: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -145,7 +153,9 @@ class Calibration:
 
     def shared(self) -> list[float] | None:
         """`own_stats` for this robot's pose when the fleet pools them, else None."""
-        return [float(v) for v in self.own_stats()] if self.params.fleet_weight > 0 else None
+        p = self.params
+        pooled = p.fleet_weight > 0 or p.fleet_prior_segments > 0
+        return [float(v) for v in self.own_stats()] if pooled else None
 
     def add(self, seg: Segment) -> bool:
         """Fit the segment in, unless the current model says it is an outlier."""
@@ -173,13 +183,26 @@ class Calibration:
 
     def _solve(self) -> OdometryErrors:
         p = self.params
-        # the prior: as many unit segments (1 m, 1 rad) of "no error" at the nominal noise
-        w_t = p.prior_segments / (2 * p.reg_sigma_m**2 + p.walk_m2_per_m)
-        w_r = p.prior_segments / (2 * p.reg_sigma_rad**2 + p.walk_rad2_per_rad)
-        f = p.fleet_weight * self._fleet
-        scale = (self._scale_num + f[0]) / (self._scale_den + f[1] + w_t)
-        normal = self._turn_normal + np.array([[f[2], f[3]], [f[3], f[4]]])
-        turn_scale, bias = np.linalg.solve(normal + np.eye(2) * w_r, self._turn_rhs + f[5:7])
+        own = self.own_stats() + p.fleet_weight * self._fleet
+        if p.fleet_prior_segments <= 0 or not self._fleet.any():
+            return self._fit(own)
+        fleet = self._fit(self._fleet)
+        centre = np.array([fleet.scale, fleet.turn_scale, fleet.heading_bias_rad_per_m])
+        return self._fit(own, centre, p.fleet_prior_segments)
+
+    def _fit(self, stats: np.ndarray, centre: np.ndarray | None = None,
+             centre_segments: float = 0.0) -> OdometryErrors:
+        """Errors from summed `own_stats`-shaped normal equations and a prior of
+        `prior_segments` + `centre_segments` unit segments (1 m, 1 rad) at the nominal noise,
+        centred on "no error" or on `centre` (scale, turn scale, heading bias)."""
+        p = self.params
+        var_t = 2 * p.reg_sigma_m**2 + p.walk_m2_per_m
+        var_r = 2 * p.reg_sigma_rad**2 + p.walk_rad2_per_rad
+        n = p.prior_segments + centre_segments
+        c = np.zeros(3) if centre is None else n * centre
+        scale = (stats[0] + c[0] / var_t) / (stats[1] + n / var_t)
+        normal = np.array([[stats[2], stats[3]], [stats[3], stats[4]]]) + np.eye(2) * (n / var_r)
+        turn_scale, bias = np.linalg.solve(normal, stats[5:7] + c[1:3] / var_r)
         return OdometryErrors(
             scale=float(np.clip(scale, -p.max_abs_scale, p.max_abs_scale)),
             turn_scale=float(np.clip(turn_scale, -p.max_abs_scale, p.max_abs_scale)),

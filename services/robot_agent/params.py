@@ -39,7 +39,9 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
         calibration=CalibrationParams(segment_m=cfg.odom_calibration_segment_m,
                                       max_weak_ratio=cfg.odom_calibration_max_weak_ratio,
                                       prior_segments=cfg.odom_calibration_prior_segments,
-                                      fleet_weight=cfg.odom_calibration_fleet_weight)
+                                      fleet_weight=cfg.odom_calibration_fleet_weight,
+                                      fleet_prior_segments=(
+                                          cfg.odom_calibration_fleet_prior_segments))
         if cfg.odom_calibration else None,
         scan_odometry=ScanOdometryParams(sigma_rad=cfg.reg_scan_sigma_rad,
                                          when_hidden=cfg.reg_scan_when_hidden)

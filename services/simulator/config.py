@@ -74,6 +74,11 @@ class SimConfig(BaseModel):
     odom_scale_error: float = Field(default=0.02, description="relative distance error")
     odom_yaw_scale_error: float = Field(default=0.01, description="relative turn error")
     odom_heading_bias_rad_per_m: float = Field(default=0.005, description="yaw drift per metre")
+    odom_error_spread: float = Field(
+        default=0.0, ge=0, le=1, description="robots' wheels differ: each robot's scale, turn "
+        "scale and heading bias are the fleet's above times (1 + this × a seeded standard "
+        "normal draw of its own; 0 = every robot the same wheels)"
+    )
     odom_noise_m_per_sqrt_m: float | None = Field(
         default=None, ge=0, description="random-walk translation noise, seeded (realistic 0.01)"
     )

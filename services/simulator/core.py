@@ -58,12 +58,17 @@ def build_model(cfg: SimConfig) -> WorldModel:
     return WorldModel(model, spawns, [robot_ids(model, i) for i in range(len(spawns))])
 
 
-def odometry_noise(cfg: SimConfig) -> OdometryNoise:
+def odometry_noise(cfg: SimConfig, robot: int = 0) -> OdometryNoise:
+    """Robot `robot`'s wheels: the fleet's systematic errors, each scaled by its own seeded
+    draw when `odom_error_spread` > 0 (no draw otherwise: missions stay as they were)."""
     sensors = sensor_model(cfg)
+    k = np.ones(3)
+    if cfg.odom_error_spread > 0:
+        k += cfg.odom_error_spread * np.random.default_rng([cfg.seed, 3, robot]).standard_normal(3)
     return OdometryNoise(
-        scale_error=cfg.odom_scale_error,
-        yaw_scale_error=cfg.odom_yaw_scale_error,
-        heading_bias_rad_per_m=cfg.odom_heading_bias_rad_per_m,
+        scale_error=cfg.odom_scale_error * float(k[0]),
+        yaw_scale_error=cfg.odom_yaw_scale_error * float(k[1]),
+        heading_bias_rad_per_m=cfg.odom_heading_bias_rad_per_m * float(k[2]),
         noise_m_per_sqrt_m=sensors.odom_noise_m_per_sqrt_m,
         noise_rad_per_sqrt_rad=sensors.odom_noise_rad_per_sqrt_rad,
     )
@@ -93,9 +98,8 @@ class Simulation:
         self._bodies = np.array([r.body for r in self.robots])
         self._act = np.array([r.actuators for r in self.robots])  # (N, 3): x, y, yaw
         self._cmd = np.zeros((len(self.robots), 2))  # applied (v, ω) per robot
-        noise = odometry_noise(cfg)
         self._odom = [
-            WheelOdometry(spawn, noise, np.random.default_rng([cfg.seed, 2, i]))
+            WheelOdometry(spawn, odometry_noise(cfg, i), np.random.default_rng([cfg.seed, 2, i]))
             for i, spawn in enumerate(self.spawns)
         ]
         self._odom_readings = [OdometryReading(s, 0.0, 0.0) for s in self.spawns]
