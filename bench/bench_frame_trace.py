@@ -27,13 +27,17 @@ from services.common.geometry import wrap_angle, xyyaw_from_T  # noqa: E402
 from services.robot_agent.agent import AgentCore  # noqa: E402
 
 
-def true_yaw_at(gt: np.ndarray) -> callable:
-    """yaw(t) of the nearest ground-truth row (TUM: t x y z qx qy qz qw)."""
+def true_pose_at(gt: np.ndarray) -> callable:
+    """(x, y, yaw)(t) of the nearest ground-truth row (TUM: t x y z qx qy qz qw)."""
     yaws = Rotation.from_quat(gt[:, 4:8]).as_euler("zyx")[:, 0]
-    return lambda t: float(yaws[int(np.argmin(np.abs(gt[:, 0] - t)))])
+
+    def at(t: float) -> np.ndarray:
+        k = int(np.argmin(np.abs(gt[:, 0] - t)))
+        return np.array([gt[k, 1], gt[k, 2], yaws[k]])
+    return at
 
 
-def install(core: AgentCore, true_yaw, t_from: float, t_to: float, tick_s: float) -> None:
+def install(core: AgentCore, true_pose, t_from: float, t_to: float, tick_s: float) -> None:
     """Wrap the core's localizer so that each frame in [t_from, t_to] prints one line."""
     loc, state = core.localizer, {"tick": 0, "wall": None}
     wall_heading, update, on_odometry = loc._wall_heading, loc.update, core.on_odometry
@@ -48,7 +52,7 @@ def install(core: AgentCore, true_yaw, t_from: float, t_to: float, tick_s: float
         out = update(points_base, T_odom_base, removed_frac)
         t = state["tick"] * tick_s
         if t_from <= t <= t_to:
-            print(line(t, out, removed_frac, loc, state["wall"], true_yaw(t)))
+            print(line(t, out, removed_frac, loc, state["wall"], true_pose(t)))
         return out
 
     def traced_odometry(odom):
@@ -58,19 +62,27 @@ def install(core: AgentCore, true_yaw, t_from: float, t_to: float, tick_s: float
     loc._wall_heading, loc.update, core.on_odometry = traced_wall, traced_update, traced_odometry
 
 
-def line(t: float, out, removed: float, loc, wall, yaw_true: float) -> str:
+def line(t: float, out, removed: float, loc, wall, pose_true: np.ndarray) -> str:
+    yaw_true = float(pose_true[2])
+
     def err(yaw: float) -> float:
         return math.degrees(wrap_angle(yaw - yaw_true))
 
+    def xy_err(T: np.ndarray) -> str:
+        dx, dy = 100 * (xyyaw_from_T(T)[:2] - pose_true[:2])
+        return f"({dx:+.1f}, {dy:+.1f}) cm"
+
     sigma = math.degrees(math.sqrt(loc.P[2, 2]))
     text = (f"t {t:6.1f}  {out.reason or 'accepted':20s} removed {removed:.2f}  yaw error "
-            f"{err(xyyaw_from_T(out.T_loc_base)[2]):+.2f}° σ {sigma:.2f}°")
+            f"{err(xyyaw_from_T(out.T_loc_base)[2]):+.2f}° σ {sigma:.2f}° "
+            f"xy {xy_err(out.T_loc_base)}")
     if loc.walls is not None and wall is not None:
         change = math.degrees(wrap_angle(wall[1] - wall[0]))
         text += (f"  walls f{loc.walls.n_fused} r{loc.walls.n_rejected} {change:+.2f}° "
                  f"(error before {err(wall[0]):+.2f}°)")
     if out.T_measured is not None:
-        text += f"  measured {err(xyyaw_from_T(out.T_measured)[2]):+.2f}°"
+        text += (f"  measured {err(xyyaw_from_T(out.T_measured)[2]):+.2f}° "
+                 f"{xy_err(out.T_measured)} m² {out.mahalanobis2:.1f}")
     return text + f"  true yaw {math.degrees(yaw_true):.1f}°"
 
 
@@ -84,10 +96,10 @@ def main() -> None:
     gt_path = args.rec / "run" / f"trajectory_{args.robot}_gt.tum"
     if not gt_path.exists():
         ap.error(f"{gt_path} not found: is {args.rec} a bench_agent_replay.py record folder?")
-    true_yaw = true_yaw_at(np.loadtxt(gt_path, ndmin=2))
+    true_pose = true_pose_at(np.loadtxt(gt_path, ndmin=2))
     config = replay_mod.load_config(args.rec / "run" / "config.yaml", {})
     replay_mod.instrument = lambda core, timer: install(
-        core, true_yaw, args.t_from, args.t_to, config.sim.tick_s)
+        core, true_pose, args.t_from, args.t_to, config.sim.tick_s)
     replay_mod.replay(args.rec, args.robot, None)
 
 

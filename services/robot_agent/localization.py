@@ -120,12 +120,16 @@ class Localizer:
                       T_odom_base: np.ndarray) -> np.ndarray:
         """The guess after the heading the frame's walls give; T_loc_odom takes it up."""
         reacquired = self.walls.n_reacquired
-        xyyaw, self.P = self.walls.update(np.array(xyyaw_from_T(guess)), self.P,
-                                          cloud.points()[:, :3], cloud.normals()[:, :3],
-                                          xyyaw_from_T(T_odom_base)[2])
-        if self.walls.n_reacquired > reacquired and self.registrar.params.reset_on_wall_reacquire:
+        before = np.array(xyyaw_from_T(guess))
+        xyyaw, self.P = self.walls.update(before, self.P, cloud.points()[:, :3],
+                                          cloud.normals()[:, :3], xyyaw_from_T(T_odom_base)[2])
+        p = self.registrar.params
+        turned = abs(float(wrap_angle(xyyaw[2] - before[2])))
+        if (self.walls.n_reacquired > reacquired and p.reset_on_wall_reacquire) or (
+                0 < p.reset_on_wall_change_rad < turned):
             self.registrar.reset()
             self._rejected = []
+            self.outcomes["map reset by the walls"] += 1
         guess = T_from_xyyaw(*xyyaw)
         self.T_loc_odom = planar(guess @ invert(T_odom_base))
         return guess
