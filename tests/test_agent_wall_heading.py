@@ -276,3 +276,44 @@ def test_a_heading_the_walls_took_back_stays_once_the_map_built_off_is_forgotten
     assert all(abs(yaw) < 0.1 for yaw in forgetting[3:])
     keeping = _heading_after_reacquiring(reset=False)
     assert any(abs(yaw) > 1.0 for yaw in keeping[4:])
+
+
+def _after_the_team_corrects(reset_rad: float) -> list[np.ndarray]:
+    """(x, y, yaw°) per frame of a localizer that learned the walls while 1° off (its map
+    built there too), standing still in a room, once two teammates' directions arrive."""
+    from services.robot_agent.drift_filter import FilterParams
+    from services.robot_agent.localization import Localizer
+    from services.robot_agent.registrar import RegistrationParams
+    rng = np.random.default_rng(4)
+    room = _room(rng, 0.002)
+    params = RegistrationParams(
+        map_voxel_m=0.05, min_points=30, filter=FilterParams(reacquire_frames=3),
+        wall_heading=WallHeadingParams(), reset_on_wall_change_rad=reset_rad)
+    loc = Localizer(params)
+    still = T_from_xyyaw(0.0, 0.0, 0.0)
+    points = transform_points(invert(still), room)
+    points = points[np.linalg.norm(points[:, :2], axis=1) < 4.0]
+    off = T_from_xyyaw(0.0, 0.0, math.radians(1.0))  # a turn on odometry alone lost 1°
+    loc.T_loc_odom = off
+    loc.P = np.diag([1e-6, 1e-6, math.radians(0.05) ** 2])
+    for _ in range(PARAMS.learn_frames + 1):  # learned (and mapped) 1° off
+        loc.update(points, still)
+    assert abs(math.degrees(loc.walls.own_rad) - 1.0) < 0.1
+    for rid in (1, 2):
+        loc.walls.receive(rid, 0.0, 0.0)
+    out = []
+    for _ in range(10):
+        x, y, yaw = xyyaw_from_T(loc.update(points, still).T_loc_base)
+        out.append(np.array([x, y, math.degrees(yaw)]))
+    return out
+
+
+def test_a_heading_the_team_corrects_stays_once_the_map_built_off_is_forgotten() -> None:
+    """The team's direction turns a robot's heading back by 1° in one frame; forgetting the
+    registration map built at the old heading keeps the correction (yaw within 0.1° from
+    then on); keeping the map, registrations against it take the heading back."""
+    forgetting = _after_the_team_corrects(math.radians(0.5))
+    assert all(abs(p[2]) < 0.1 for p in forgetting[1:])
+    assert all(np.hypot(p[0], p[1]) < 0.01 for p in forgetting)
+    keeping = _after_the_team_corrects(0.0)
+    assert any(abs(p[2]) > 0.5 for p in keeping[1:])
