@@ -288,7 +288,7 @@ def _after_the_team_corrects(reset_rad: float) -> list[np.ndarray]:
     room = _room(rng, 0.002)
     params = RegistrationParams(
         map_voxel_m=0.05, min_points=30, filter=FilterParams(reacquire_frames=3),
-        wall_heading=WallHeadingParams(), reset_on_wall_change_rad=reset_rad)
+        wall_heading=WallHeadingParams(), reset_on_direction_change_rad=reset_rad)
     loc = Localizer(params)
     still = T_from_xyyaw(0.0, 0.0, 0.0)
     points = transform_points(invert(still), room)
@@ -309,9 +309,10 @@ def _after_the_team_corrects(reset_rad: float) -> list[np.ndarray]:
 
 
 def test_a_heading_the_team_corrects_stays_once_the_map_built_off_is_forgotten() -> None:
-    """The team's direction turns a robot's heading back by 1° in one frame; forgetting the
-    registration map built at the old heading keeps the correction (yaw within 0.1° from
-    then on); keeping the map, registrations against it take the heading back."""
+    """The team's direction overrules a robot's own by 1° and turns its heading back in one
+    frame; forgetting the registration map built at the old heading keeps the correction
+    (yaw within 0.1° from then on); keeping the map, registrations against it take the
+    heading back."""
     forgetting = _after_the_team_corrects(math.radians(0.5))
     assert all(abs(p[2]) < 0.1 for p in forgetting[1:])
     assert all(np.hypot(p[0], p[1]) < 0.01 for p in forgetting)

@@ -120,13 +120,12 @@ class Localizer:
                       T_odom_base: np.ndarray) -> np.ndarray:
         """The guess after the heading the frame's walls give; T_loc_odom takes it up."""
         reacquired = self.walls.n_reacquired
-        before = np.array(xyyaw_from_T(guess))
-        xyyaw, self.P = self.walls.update(before, self.P, cloud.points()[:, :3],
-                                          cloud.normals()[:, :3], xyyaw_from_T(T_odom_base)[2])
+        xyyaw, self.P = self.walls.update(np.array(xyyaw_from_T(guess)), self.P,
+                                          cloud.points()[:, :3], cloud.normals()[:, :3],
+                                          xyyaw_from_T(T_odom_base)[2])
         p = self.registrar.params
-        turned = abs(float(wrap_angle(xyyaw[2] - before[2])))
         if (self.walls.n_reacquired > reacquired and p.reset_on_wall_reacquire) or (
-                0 < p.reset_on_wall_change_rad < turned):
+                0 < p.reset_on_direction_change_rad < abs(self.walls.direction_change_rad)):
             self.registrar.reset()
             self._rejected = []
             self.outcomes["map reset by the walls"] += 1
