@@ -288,7 +288,7 @@ def _after_the_team_corrects(reset_rad: float) -> list[np.ndarray]:
     room = _room(rng, 0.002)
     params = RegistrationParams(
         map_voxel_m=0.05, min_points=30, filter=FilterParams(reacquire_frames=3),
-        wall_heading=WallHeadingParams(), reset_on_direction_change_rad=reset_rad)
+        wall_heading=WallHeadingParams(), reset_on_wall_conflict_rad=reset_rad)
     loc = Localizer(params)
     still = T_from_xyyaw(0.0, 0.0, 0.0)
     points = transform_points(invert(still), room)
@@ -310,11 +310,36 @@ def _after_the_team_corrects(reset_rad: float) -> list[np.ndarray]:
 
 def test_a_heading_the_team_corrects_stays_once_the_map_built_off_is_forgotten() -> None:
     """The team's direction overrules a robot's own by 1° and turns its heading back in one
-    frame; forgetting the registration map built at the old heading keeps the correction
-    (yaw within 0.1° from then on); keeping the map, registrations against it take the
-    heading back."""
+    frame, and the frame's registration sides with the old heading: forgetting the map built
+    there keeps the correction (yaw within 0.1° from then on); keeping the map,
+    registrations against it take the heading back."""
     forgetting = _after_the_team_corrects(math.radians(0.5))
     assert all(abs(p[2]) < 0.1 for p in forgetting[1:])
     assert all(np.hypot(p[0], p[1]) < 0.01 for p in forgetting)
     keeping = _after_the_team_corrects(0.0)
     assert any(abs(p[2]) > 0.5 for p in keeping[1:])
+
+
+def test_a_map_that_agrees_with_the_walls_correction_is_kept() -> None:
+    """A heading lost behind teammates (the map is right, the filter 1° off with a wide σ):
+    the walls turn it back, the frame's registration agrees, and the map stays."""
+    from services.robot_agent.drift_filter import FilterParams
+    from services.robot_agent.localization import Localizer
+    from services.robot_agent.registrar import RegistrationParams
+    rng = np.random.default_rng(6)
+    room = _room(rng, 0.002)
+    loc = Localizer(RegistrationParams(
+        map_voxel_m=0.05, min_points=30, filter=FilterParams(),
+        wall_heading=WallHeadingParams(), reset_on_wall_conflict_rad=math.radians(0.5)))
+    still = T_from_xyyaw(0.0, 0.0, 0.0)
+    points = transform_points(invert(still), room)
+    points = points[np.linalg.norm(points[:, :2], axis=1) < 4.0]
+    for _ in range(PARAMS.learn_frames + 1):
+        loc.update(points, still)
+    inserted = loc.registrar.n_inserted
+    loc.T_loc_odom = T_from_xyyaw(0.0, 0.0, math.radians(1.0))
+    loc.P = np.diag([1e-6, 1e-6, math.radians(1.5) ** 2])
+    yaw = xyyaw_from_T(loc.update(points, still).T_loc_base)[2]
+    assert abs(math.degrees(yaw)) < 0.1
+    assert loc.outcomes["map reset by the walls"] == 0
+    assert loc.registrar.n_inserted >= inserted

@@ -80,11 +80,11 @@ class AgentConfig(BaseModel):
     reg_reacquire_rad_per_rad: float = Field(
         default=0.03, ge=0, description="re-acquisition: how far (rad per rad turned) the "
         "drift rejected registrations imply may change between them (odometry turn error)")
-    reg_wall_reset_direction_rad: float = Field(
-        default=0.0, ge=0, description="forget the registration map when the walls' direction "
-        "the heading is held to moves by more than this (rad; 0 = never): the team's "
-        "overruling the robot's own, which it learned, and mapped, at a heading that far off; "
-        "registrations against that map would take the correction back")
+    reg_wall_reset_conflict_rad: float = Field(
+        default=0.0, ge=0, description="forget the registration map when one frame's walls "
+        "turn the heading by more than this (rad; 0 = never) and the frame's registration "
+        "against the map sides with the heading from before: the map was built at the heading "
+        "the walls corrected, and aligning to it would take the correction back")
     reg_wall_reacquire_reset: bool = Field(
         default=True, description="with reg_wall_reacquire_frames: when the walls take the "
         "heading back, the registration map (built at the wrong heading, it would pull it "

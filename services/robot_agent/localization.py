@@ -51,6 +51,7 @@ class Localizer:
         self.outcomes: Counter[str] = Counter()  # "accepted" or the rejection reason
         self.P = np.zeros((3, 3))  # covariance of T_loc_base (x, y, yaw): the start is known
         self._T_odom_prev: np.ndarray | None = None
+        self._wall_turn: tuple[float, float] | None = None  # this frame's (yaw before, after)
         # each rejected registration's T_loc_base and its frame's T_odom_base (x, y, yaw)
         self._rejected: list[tuple[np.ndarray, np.ndarray]] = []
         self.odometry = (CalibratedOdometry(params.calibration)
@@ -85,6 +86,7 @@ class Localizer:
         Except the first: robots start close together, and a map anchored only after the
         initial turn in place would keep that turn's odometry error (0.44° in missions)."""
         filt = self.registrar.params.filter
+        self._wall_turn = None
         self.observe_odometry(T_odom_base)
         T_odom_base = self._calibrated(T_odom_base)
         hidden = (removed_frac > self.registrar.params.max_removed_frac
@@ -123,15 +125,27 @@ class Localizer:
         xyyaw, self.P = self.walls.update(np.array(xyyaw_from_T(guess)), self.P,
                                           cloud.points()[:, :3], cloud.normals()[:, :3],
                                           xyyaw_from_T(T_odom_base)[2])
-        p = self.registrar.params
-        if (self.walls.n_reacquired > reacquired and p.reset_on_wall_reacquire) or (
-                0 < p.reset_on_direction_change_rad < abs(self.walls.direction_change_rad)):
+        if self.walls.n_reacquired > reacquired and self.registrar.params.reset_on_wall_reacquire:
             self.registrar.reset()
             self._rejected = []
-            self.outcomes["map reset by the walls"] += 1
+        turn = float(wrap_angle(xyyaw[2] - xyyaw_from_T(guess)[2]))
+        limit = self.registrar.params.reset_on_wall_conflict_rad
+        self._wall_turn = (xyyaw_from_T(guess)[2], xyyaw[2]) if 0 < limit < abs(turn) else None
         guess = T_from_xyyaw(*xyyaw)
         self.T_loc_odom = planar(guess @ invert(T_odom_base))
         return guess
+
+    def _sides_against_the_walls(self, yaw_measured: float) -> bool:
+        """Whether this frame's walls turned the heading far (`reset_on_wall_conflict_rad`)
+        and its registration against the map sides with the heading from before: the map
+        was built at the heading the walls corrected (a team's direction overruling the
+        robot's own, a turn behind teammates registered wrong), and aligning to it would take
+        the correction back frame after frame. A map that agrees with the walls is kept."""
+        if self._wall_turn is None:
+            return False
+        before, after = self._wall_turn
+        return abs(float(wrap_angle(yaw_measured - before))) < abs(
+            float(wrap_angle(yaw_measured - after)))
 
     def _scan_turn(self, frame: tuple[small_gicp.PointCloud, small_gicp.KdTree] | None,
                    T_odom_base: np.ndarray, filt: FilterParams,
@@ -189,6 +203,11 @@ class Localizer:
             return RegistrationOutcome(guess, False, aligned)
         T_reg, H, inliers = aligned
         meas = np.array(xyyaw_from_T(T_reg))
+        if self._sides_against_the_walls(meas[2]):
+            reg.reset()
+            reg.insert(cloud, guess)
+            self._rejected = []
+            return RegistrationOutcome(guess, False, "map reset by the walls", T_reg)
         R = measurement_cov(H, meas[2], filt) * overlap_inflation(inliers, filt)
         fusion = fuse(np.array(xyyaw_from_T(guess)), self.P, meas, R, filt)
         if not fusion.accepted:

@@ -25,7 +25,7 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
         insert_min_m=cfg.reg_insert_min_m, insert_min_rad=cfg.reg_insert_min_rad,
         use_unconverged=cfg.reg_use_unconverged,
         reset_on_wall_reacquire=cfg.reg_wall_reacquire_reset,
-        reset_on_direction_change_rad=cfg.reg_wall_reset_direction_rad,
+        reset_on_wall_conflict_rad=cfg.reg_wall_reset_conflict_rad,
         max_corr_m=cfg.reg_max_corr_m,
         align_max_range_m=cfg.reg_align_max_range_m,
         coarse_voxel_m=cfg.reg_coarse_voxel_m, coarse_below_frac=cfg.reg_coarse_below_frac,

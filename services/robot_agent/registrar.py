@@ -59,10 +59,9 @@ class RegistrationParams:
     # when the walls take the heading back (wall_heading.py, re-acquisition), the frames'
     # map is forgotten: it was built at the wrong heading and would pull it back
     reset_on_wall_reacquire: bool = False
-    # ... and when the walls' world direction moves by more than this (rad; 0 = never): the
-    # team's overruling the robot's own, learned (and mapped) at a heading that far off after
-    # a turn on odometry alone; registrations against that map would take the heading back
-    reset_on_direction_change_rad: float = 0.0
+    # ... and when one frame's walls turn the heading by more than this (rad; 0 = never) and
+    # its registration sides with the heading from before (localization.py)
+    reset_on_wall_conflict_rad: float = 0.0
     # with the filter: learn odometry's scale, turn scale and heading bias from segments
     # between good registrations, and correct the odometry by them (None = raw odometry)
     calibration: CalibrationParams | None = None

@@ -219,7 +219,6 @@ class WallHeading:
         self.n_rejected = 0
         self.n_reacquired = 0
         self._rejected: list[float] = []  # innovations of the rejections in a row
-        self.direction_change_rad = 0.0  # how far this frame moved the world direction
 
     @property
     def own_rad(self) -> float | None:
@@ -253,7 +252,6 @@ class WallHeading:
             world = own
         if world is not None and self.world_rad is not None:
             delta = float(fold(world - self.world_rad))
-            self.direction_change_rad = delta
             if delta != 0.0:
                 P = P.copy()
                 P[2, 2] += delta**2
@@ -266,7 +264,6 @@ class WallHeading:
         `yaw_odom`: the frame's odometry heading, against which rejected headings are
         compared for re-acquisition (the estimate itself may jump meanwhile)."""
         self.n_frames += 1
-        self.direction_change_rad = 0.0
         direction = wall_direction(points_base, normals_base, self.params)
         if direction is None:
             return xyyaw, P
