@@ -155,21 +155,25 @@ def test_an_idle_robot_holds_still_while_teammates_hide_its_view() -> None:
 
 
 def test_the_fleet_pools_odometry_calibration_through_pose_messages() -> None:
-    """With fleet_weight > 0 an agent's poses carry its calibration sums and a teammate's
-    sums move its estimate; by default neither happens (the messages are as before)."""
+    """With the fleet's prior (the default) or fleet_weight > 0 an agent's poses carry its
+    calibration sums and a teammate's sums move its estimate; with both off neither happens
+    (the messages are as they were before the fleet pooled)."""
     from schemas.messages import RobotPose
 
     sums = [1.0e6 * 0.02, 1.0e6, 100.0, 0.0, 100.0, 1.0, 0.5]  # 2 % scale, well measured
     teammate = RobotPose(robot_id=1, tick=1, stamp_ns=10**8, pose_world=Pose2D(x=1, y=0, yaw=0),
                          odometry_stats=sums)
-    for weight in (0.0, 1.0):
-        core = AgentCore(AgentConfig(odom_calibration_fleet_weight=weight), 0, 0.1)
+    assert AgentConfig().odom_calibration_fleet_prior_segments > 0
+    for weight, prior in ((0.0, 0.0), (1.0, 0.0), (0.0, 8.0)):
+        core = AgentCore(AgentConfig(odom_calibration_fleet_weight=weight,
+                                     odom_calibration_fleet_prior_segments=prior), 0, 0.1)
         _, outs = _run(core, 3)
         pose = next(o.message for o in outs[-1] if o.topic == "pose")
-        assert (pose.odometry_stats is None) == (weight == 0.0)
+        pooled = weight > 0 or prior > 0
+        assert (pose.odometry_stats is None) == (not pooled)
         core.on_pose(decode(encode(teammate), RobotPose))
         scale = core.localizer.odometry.calibration.errors.scale
-        assert scale == (pytest.approx(0.02, abs=0.002) if weight else 0.0)
+        assert scale == (pytest.approx(0.02, abs=0.002) if pooled else 0.0)
 
 
 def _turn_cmds(core: AgentCore, removed: float, ticks: int) -> list[CmdVel]:

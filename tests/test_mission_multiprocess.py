@@ -69,7 +69,14 @@ def test_two_robot_mission_over_the_bus(tmp_path: Path) -> None:
             wait_for(lambda: any(t.goals_reached for t in monitor.tracks.values()),
                      monitor, group, 300, "a reached goal")
             wait_for(lambda: monitor.sim_time_s >= 40.0, monitor, group, 300, "40 s of sim time")
-            assert int((monitor.grid.cells >= 0).sum()) > 2 * first_known, "the map did not grow"
+
+            def known() -> int:
+                return int((monitor.grid.cells >= 0).sum())
+            # the route decides how soon (2D coverage at 40 s: 36-53 % in this mission
+            # as the calibration's prior changes); doubling before the 90 s cap is the test
+            wait_for(lambda: known() > 2 * first_known or monitor.sim_time_s >= 85.0,
+                     monitor, group, 300, "the map to double or 85 s of sim time")
+            assert known() > 2 * first_known, "the map did not grow"
             for robot, track in monitor.tracks.items():
                 xy = np.asarray(track.gt_xyyaw)[:, :2]
                 travelled = np.linalg.norm(np.diff(xy, axis=0), axis=1).sum()

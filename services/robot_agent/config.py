@@ -190,9 +190,11 @@ class AgentConfig(BaseModel):
         "poses) count this much each in this agent's fit: 1 pools the fleet's (robots of one "
         "model, the same wheel errors), 0 each its own (docs/agent.md, 'The fleet's wheels')")
     odom_calibration_fleet_prior_segments: float = Field(
-        default=0.0, ge=0, description="teammates' pooled calibration (sent with their poses) "
-        "is a prior worth this many 1 m segments in this agent's fit, which its own segments "
-        "outweigh as they accumulate (robots whose wheels differ; 0 = none)")
+        default=8.0, ge=0, description="teammates' pooled calibration (sent with their poses) "
+        "is the centre of this agent's prior, worth this many 1 m segments more than the 'no "
+        "error' one, which its own segments outweigh as they accumulate (robots of one model "
+        "whose wheels may differ; 0 = its own segments only; docs/agent.md, 'The fleet's "
+        "wheels as a prior')")
     odom_calibration_max_weak_ratio: float = Field(
         default=10.0, ge=1, description="a registration ends a calibration segment only when "
         "its weakest translation direction is at most this many times weaker (variance) than "
