@@ -8,6 +8,7 @@ from scipy import ndimage
 from services.common.grid import GridSpec
 from services.common.planning import (
     astar,
+    dilate_disk,
     disk,
     distance_field,
     distance_fields,
@@ -65,6 +66,20 @@ def test_inflate_equals_a_disk_dilation() -> None:
         r = int(rng.integers(1, 9))
         want = ndimage.binary_dilation(occupied, structure=disk(r))
         assert np.array_equal(inflate(occupied, r), want)
+
+
+def test_dilate_disk_by_any_squared_radius_equals_a_dilation_by_those_offsets() -> None:
+    """`dilate_disk(mask, r2)` marks what `binary_dilation` by the offsets with dy² + dx² ≤
+    r2 marks, r2 not a square included (the edge's nearness to unknown cells)."""
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        shape = tuple(int(n) for n in rng.integers(1, 40, 2))
+        mask = rng.random(shape) < rng.choice([0.005, 0.05, 0.3])
+        r2 = int(rng.integers(0, 70))
+        r = int(np.sqrt(r2))
+        yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
+        want = ndimage.binary_dilation(mask, structure=yy * yy + xx * xx <= r2) if r2 else mask
+        assert np.array_equal(dilate_disk(mask, r2), want)
 
 
 def test_grid_spec_round_trip() -> None:

@@ -173,16 +173,22 @@ def test_restart_epoch_and_resend_are_accepted() -> None:
 
 
 def test_near_unknown_on_a_window_equals_the_whole_grid_transform() -> None:
-    """Regions within `max_m` of unknown space, from the transform of a window around them,
-    as from the whole grid's; and none when no unknown cell is within reach."""
+    """Regions within `max_m` of unknown space, from the k-d tree of the unknown cells that
+    border known ones in a window around them, as from the whole grid's transform (ties at
+    `max_m` included); and none when no unknown cell is within reach."""
     rng = np.random.default_rng(11)
     spec = GridSpec(0.0, 0.0, V, 80, 120)
     seen = set()
-    for _ in range(30):
+    for trial in range(150):
         known = np.ones(spec.shape, bool)
         for _ in range(int(rng.integers(0, 4))):  # unknown patches anywhere
             r, c = rng.integers(0, 80), rng.integers(0, 120)
             known[r:r + int(rng.integers(1, 8)), c:c + int(rng.integers(1, 8))] = False
+        if trial % 3 == 0:  # scattered unknown cells
+            known &= rng.random(spec.shape) > 0.002
+        max_m = float(rng.choice([0.15, 0.25, 0.5, 1.0]))
+        if trial % 5 == 0:  # a large unknown area: regions deep inside it are at distance 0
+            known[20:70, 30:100] = False
         labels = np.zeros(spec.shape, np.int32)
         n = int(rng.integers(1, 6))
         for lab in range(1, n + 1):
@@ -191,8 +197,8 @@ def test_near_unknown_on_a_window_equals_the_whole_grid_transform() -> None:
         fs = replace(empty_frontiers(spec.shape), labels=labels, sizes=np.ones(n, np.int64))
         dist = ndimage.distance_transform_edt(known) * V if not known.all() else None
         want = (np.zeros(n, bool) if dist is None else
-                np.bincount(labels[(labels > 0) & (dist <= 0.5)] - 1, minlength=n) > 0)
-        got = near_unknown(fs, known, spec, 0.5)
+                np.bincount(labels[(labels > 0) & (dist <= max_m)] - 1, minlength=n) > 0)
+        got = near_unknown(fs, known, spec, max_m)
         assert np.array_equal(got, want)
         seen.update(got.tolist())
     assert seen == {True, False}

@@ -3,12 +3,18 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy import ndimage
 
 from schemas.messages import GoalStatus, Pose2D, RobotPose
 from services.common.grid import GridSpec
 from services.edge_server.completion import CompletionJudge
 from services.edge_server.config import EdgeConfig
-from services.edge_server.frontiers import _anchors, detect_frontiers, frontier_cells
+from services.edge_server.frontiers import (
+    GoalTransform,
+    _anchors,
+    detect_frontiers,
+    frontier_cells,
+)
 from services.edge_server.planner import EdgePlanner
 from tests.test_edge_map import make_submap, voxel_centres
 
@@ -59,6 +65,35 @@ def test_anchor_is_the_cell_nearest_the_centroid_first_in_row_order_on_a_tie() -
         assert np.array_equal(anchor, rc[order[first]])
         assert tuple(anchor[4]) == (11, 11) and tuple(anchor[5]) == (20, 5)
 
+
+def test_nearest_goal_lookup_is_scipys_feature_transform_where_it_is_close_enough() -> None:
+    """`GoalTransform.nearest` answers what the whole grid's EDT with indices answers at the
+    asked cells (ties included: scipy keeps the smallest column, then row) wherever the
+    nearest allowed cell lies within the asked distance, and inf beyond it."""
+    rng = np.random.default_rng(3)
+    ties = 0
+    for trial in range(200):
+        shape = tuple(rng.integers(5, 70, 2))
+        goal_ok = rng.random(shape) < rng.choice([0.002, 0.02, 0.2, 0.6])
+        if trial % 10 == 0:
+            goal_ok[:] = False
+            goal_ok[rng.integers(0, shape[0]), rng.integers(0, shape[1])] = True
+        if not goal_ok.any():
+            continue
+        dist, idx = ndimage.distance_transform_edt(~goal_ok, return_indices=True)
+        rc = np.stack([rng.integers(0, shape[0], 60), rng.integers(0, shape[1], 60)], 1)
+        max_cells = float(rng.choice([1.5, 7.0, 20.0, 30.0]))
+        got_dist, got_rc = GoalTransform(goal_ok).nearest(rc, max_cells)
+        near = dist[rc[:, 0], rc[:, 1]] <= max_cells
+        assert np.array_equal(got_dist[near], dist[rc[:, 0], rc[:, 1]][near])
+        assert np.array_equal(got_rc[near], np.stack([idx[0], idx[1]], -1)[rc[near, 0],
+                                                                           rc[near, 1]])
+        assert (got_dist[~near] > max_cells).all()
+        feats = np.argwhere(goal_ok)
+        for r, c in rc[near]:
+            d2 = ((feats - [r, c]) ** 2).sum(1)
+            ties += int((d2 == d2.min()).sum() > 1)
+    assert ties > 100  # the tie rule was exercised
 
 def test_tiny_clusters_dropped_and_goals_only_on_allowed_cells() -> None:
     spec = GridSpec(0.0, 0.0, V, 60, 60)

@@ -28,21 +28,27 @@ def disk(radius_cells: int) -> np.ndarray:
 
 def inflate(occupied: np.ndarray, radius_cells: int) -> np.ndarray:
     """Occupied cells grown by a disk of `radius_cells` (the robot's radius): the same cells
-    as `ndimage.binary_dilation(occupied, disk(r))`, built row by row of the disk. Each of
-    its rows is a run of half-width ⌊√(r² − dy²)⌋, so the dilation is one running maximum
-    along the rows per half-width, shifted by dy and OR-ed (a few passes over the grid
-    instead of one per disk cell)."""
-    occupied = np.asarray(occupied, dtype=bool)
-    r = int(radius_cells)
-    if r <= 0 or not occupied.any():
-        return occupied.copy()
-    H = occupied.shape[0]
+    as `ndimage.binary_dilation(occupied, disk(r))` (`dilate_disk` with r²)."""
+    return dilate_disk(occupied, int(radius_cells) ** 2)
+
+
+def dilate_disk(mask: np.ndarray, r2: int) -> np.ndarray:
+    """`mask` grown by the disk of the cell offsets (dy, dx) with dy² + dx² ≤ `r2`, built row
+    by row of the disk. Each of its rows is a run of half-width ⌊√(r2 − dy²)⌋, so the
+    dilation is one running maximum along the rows per half-width, shifted by dy and OR-ed
+    (a few passes over the grid instead of one per disk cell)."""
+    mask = np.asarray(mask, dtype=bool)
+    r2 = int(r2)
+    if r2 <= 0 or not mask.any():
+        return mask.copy()
+    r = math.isqrt(r2)
+    H = mask.shape[0]
     runs: dict[int, np.ndarray] = {}
-    out = np.zeros_like(occupied)
+    out = np.zeros_like(mask)
     for dy in range(-r, r + 1):
-        w = math.isqrt(r * r - dy * dy)
+        w = math.isqrt(r2 - dy * dy)
         if w not in runs:
-            runs[w] = ndimage.maximum_filter1d(occupied.view(np.uint8), 2 * w + 1, axis=1,
+            runs[w] = ndimage.maximum_filter1d(mask.view(np.uint8), 2 * w + 1, axis=1,
                                                mode="constant", cval=0).view(bool)
         if abs(dy) < H:  # the disk is symmetric: out[y] |= run[y + dy]
             src, dst = slice(max(dy, 0), H + min(dy, 0)), slice(max(-dy, 0), H - max(dy, 0))
