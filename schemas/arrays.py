@@ -3,7 +3,10 @@
 A field annotated `Annotated[np.ndarray, ArraySpec("float32", (None, 3))]` accepts a numpy
 array (when building a message) or the wire map `{"dtype", "shape", "data", "z"}` (when
 decoding), checks dtype, shape, finiteness and the size cap, and serialises back to the wire
-map. `z` marks zstd-compressed bytes.
+map. `z` marks zstd-compressed bytes; `f` names a lossless filter applied before compression
+(`delta`: differences along the last axis, in the array's own wrapping integer type;
+`shuffle`: the bytes of each element split into planes), which the decoder undoes. The
+decoded array is the encoded one bit for bit either way.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from pydantic_core import PydanticCustomError, core_schema
 
 DEFAULT_MAX_ARRAY_BYTES = 64 * 1024 * 1024
 _ZSTD_LEVEL = 3
+FILTERS = ("delta", "shuffle")
 
 
 def _max_bytes(info: ValidationInfo | None) -> int:
@@ -33,6 +37,15 @@ class ArraySpec:
     shape: tuple[int | None, ...] | None = None
     compress: bool = False
     finite: bool = True
+    # before compressing: "delta" for integer arrays whose neighbours along the last axis
+    # are alike (sorted coordinates, a colour's channels), "shuffle" for multi-byte values
+    # whose high bytes are mostly zero (counts); None = the raw bytes
+    filter: str | None = None
+    level: int = _ZSTD_LEVEL  # zstd level (the default is cheap enough for camera frames)
+
+    def __post_init__(self) -> None:
+        if self.filter is not None and (self.filter not in FILTERS or not self.compress):
+            raise ValueError(f"filter {self.filter!r}: one of {FILTERS}, on a compressed array")
 
     @property
     def allowed(self) -> tuple[str, ...]:
@@ -92,14 +105,43 @@ class ArraySpec:
                 raise self._fail(f"zstd: {exc}") from exc
         if len(data) != expected:
             raise self._fail(f"{len(data)} bytes for shape {list(shape)} of {dtype_name}")
-        return np.frombuffer(data, dtype=dtype).reshape(shape)
+        array = np.frombuffer(data, dtype=dtype).reshape(shape)
+        kind = value.get("f")
+        if kind is None:
+            return array
+        if kind not in FILTERS or (kind == "delta" and dtype.kind not in "iu"):
+            raise self._fail(f"filter {kind!r} on {dtype_name}")
+        return _undo(kind, array)
 
     def _serialize(self, array: np.ndarray) -> dict[str, Any]:
-        data = np.ascontiguousarray(array).tobytes()
+        array = np.ascontiguousarray(array)
         wire: dict[str, Any] = {"dtype": array.dtype.name, "shape": list(array.shape)}
-        if self.compress and data:
-            wire["data"] = zstandard.ZstdCompressor(level=_ZSTD_LEVEL).compress(data)
-            wire["z"] = True
-        else:
-            wire["data"] = data
+        if not (self.compress and array.size):
+            wire["data"] = array.tobytes()
+            return wire
+        kind = self.filter if self.filter != "delta" or array.dtype.kind in "iu" else None
+        if kind == "shuffle" and array.dtype.itemsize == 1:
+            kind = None  # one byte per element: nothing to split
+        data = _apply(kind, array) if kind is not None else array.tobytes()
+        wire["data"] = zstandard.ZstdCompressor(level=self.level).compress(data)
+        wire["z"] = True
+        if kind is not None:
+            wire["f"] = kind
         return wire
+
+
+def _apply(kind: str, array: np.ndarray) -> bytes:
+    if kind == "delta":
+        out = array.copy()  # in its own type: differences wrap, and the sums wrap back
+        out[..., 1:] -= array[..., :-1]
+        return out.tobytes()
+    planes = array.reshape(-1).view(np.uint8).reshape(-1, array.dtype.itemsize)
+    return np.ascontiguousarray(planes.T).tobytes()
+
+
+def _undo(kind: str, array: np.ndarray) -> np.ndarray:
+    if kind == "delta":
+        return np.cumsum(array, axis=-1, dtype=array.dtype) if array.ndim else array
+    size = array.dtype.itemsize
+    planes = array.reshape(-1).view(np.uint8).reshape(size, -1)
+    return np.ascontiguousarray(planes.T).view(array.dtype).reshape(array.shape)

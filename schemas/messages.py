@@ -156,23 +156,27 @@ class Submap(Message):
     T_world_submap: Annotated[np.ndarray, ArraySpec("float64", (4, 4))] = Field(
         description="(4, 4) the agent's estimate of the submap frame in the world frame"
     )
-    points_mm: Annotated[np.ndarray, ArraySpec("int16", (3, None), compress=True)] = Field(
+    points_mm: Annotated[np.ndarray, ArraySpec("int16", (3, None), compress=True,
+                                               filter="delta", level=6)] = Field(
         description="(3, N) int16 voxel-centre coordinates in the submap frame, millimetres"
     )
-    offsets: Annotated[np.ndarray, ArraySpec("uint8", (None,), compress=True)] = Field(
+    offsets: Annotated[np.ndarray, ArraySpec("uint8", (None,), compress=True, level=6)] = Field(
         default_factory=lambda: np.zeros(0, np.uint8),
         description="(N,) uint8 where in its voxel each voxel's mean point lies: cell (i, j, k) "
         "of an L×L×L split of the voxel along x, y, z, coded (i·L + j)·L + k with L = "
         "`offset_levels`; empty: no means (the centres stand for the points)")
     offset_levels: Annotated[int, Field(ge=1, le=6)] = Field(
         default=1, description="L, cells per voxel edge of `offsets`")
-    colors: Annotated[np.ndarray, ArraySpec("uint8", (None, 3), compress=True)] = Field(
+    colors: Annotated[np.ndarray, ArraySpec("uint8", (None, 3), compress=True,
+                                            filter="delta", level=6)] = Field(
         description="(N, 3) uint8 RGB per point"
     )
-    counts: Annotated[np.ndarray, ArraySpec("uint16", (None,), compress=True)] = Field(
+    counts: Annotated[np.ndarray, ArraySpec("uint16", (None,), compress=True,
+                                            filter="shuffle", level=6)] = Field(
         description="(N,) observations per voxel so far"
     )
-    free_cells: Annotated[np.ndarray, ArraySpec("int16", (2, None), compress=True)] = Field(
+    free_cells: Annotated[np.ndarray, ArraySpec("int16", (2, None), compress=True,
+                                                filter="delta", level=6)] = Field(
         description="(2, M) int16 floor cells seen free, in submap-frame grid cells (x, y)"
     )
     cell_m: Annotated[float, Field(gt=0)] = Field(description="size of a free cell, metres")

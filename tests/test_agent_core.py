@@ -168,12 +168,33 @@ def test_the_fleet_pools_odometry_calibration_through_pose_messages() -> None:
         core = AgentCore(AgentConfig(odom_calibration_fleet_weight=weight,
                                      odom_calibration_fleet_prior_segments=prior), 0, 0.1)
         _, outs = _run(core, 3)
-        pose = next(o.message for o in outs[-1] if o.topic == "pose")
+        pose = next(o.message for o in outs[0] if o.topic == "pose")
         pooled = weight > 0 or prior > 0
         assert (pose.odometry_stats is None) == (not pooled)
         core.on_pose(decode(encode(teammate), RobotPose))
         scale = core.localizer.odometry.calibration.errors.scale
         assert scale == (pytest.approx(0.02, abs=0.002) if pooled else 0.0)
+
+
+def test_poses_carry_the_odometry_statistics_when_they_change_and_every_refresh() -> None:
+    """Teammates keep the last statistics they got, so a pose carries them on the first tick,
+    when they changed, and every STATS_REFRESH_TICKS (a teammate that starts late), and
+    otherwise none: the same knowledge at every teammate for a tenth of the bytes."""
+    from services.robot_agent.agent import STATS_REFRESH_TICKS
+
+    core = AgentCore(AgentConfig(), 0, 0.1)
+    calibration = core.localizer.odometry.calibration
+    own = [0.0] * 7
+    calibration.shared = lambda: list(own)  # the statistics this robot would share now
+    sent = []
+    for tick in range(31 + 2 * STATS_REFRESH_TICKS):
+        if tick == 30:
+            own[0] = 0.5  # a calibration segment closed
+        sent.append(core._stats_to_send(calibration.shared(), tick))
+    ticks = [k for k, stats in enumerate(sent) if stats is not None]
+    assert ticks == [0, 30, 30 + STATS_REFRESH_TICKS, 30 + 2 * STATS_REFRESH_TICKS]
+    assert sent[30] == [0.5] + [0.0] * 6
+    assert core._stats_to_send(None, 500) is None  # not pooled: never
 
 
 def _turn_cmds(core: AgentCore, removed: float, ticks: int) -> list[CmdVel]:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import msgpack
 import numpy as np
 import pytest
+import zstandard
 
 from schemas import DecodeError, Keys, decode, encode
 from schemas import messages as m
@@ -199,3 +200,50 @@ def test_peek_tick_reads_the_tick_and_rejects_anything_else() -> None:
     assert peek_tick(msgpack.packb({"tick": -1})) is None
     assert peek_tick(msgpack.packb({"tick": True})) is None
     assert peek_tick(msgpack.packb({"kind": "pose"})) is None
+
+
+def test_filtered_arrays_round_trip_bit_for_bit_and_shrink_a_submap() -> None:
+    """Delta (wrapping at the type's ends) and shuffle filters decode to the very array that
+    was encoded, and a submap of sorted voxels with smooth colours gets smaller on the wire."""
+    rng = np.random.default_rng(1)
+    n = 4000
+    ends = np.array([[-32768, 32767, 0, -1], [32767, -32768, 1, 0], [5, -5, 32767, -32768]],
+                    np.int16)
+    points = np.sort(rng.integers(-3000, 3000, (3, n)).astype(np.int16), axis=1)
+    points[:, :4] = ends
+    grey = rng.integers(0, 256, n)
+    colors = np.stack([grey, grey + rng.integers(-3, 4, n), grey], 1).clip(0, 255)
+    colors = colors.astype(np.uint8)
+    colors[:2] = [[0, 255, 0], [255, 0, 255]]
+    sub = m.Submap(robot_id=1, submap_id=4, seq=9, tick=1, stamp_ns=1, T_world_submap=np.eye(4),
+                   points_mm=points, colors=colors,
+                   counts=rng.integers(1, 70000, n).clip(0, 65535).astype(np.uint16),
+                   free_cells=rng.integers(-32768, 32767, (2, 50), dtype=np.int16), cell_m=0.05)
+    raw = _raw(sub)
+    assert raw["points_mm"]["f"] == "delta" and raw["counts"]["f"] == "shuffle"
+    back = decode(encode(sub), m.Submap)
+    for name in ("points_mm", "colors", "counts", "free_cells"):
+        a, b = getattr(sub, name), getattr(back, name)
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    unfiltered = dict(raw)  # a sender without filters still decodes
+
+    for name in ("points_mm", "colors", "counts", "free_cells"):
+        arr = getattr(sub, name)
+        unfiltered[name] = {"dtype": arr.dtype.name, "shape": list(arr.shape),
+                            "data": arr.tobytes()}
+    assert decode(_pack(unfiltered), m.Submap).points_mm.tobytes() == points.tobytes()
+    level3 = sum(len(zstandard.ZstdCompressor(level=3).compress(getattr(sub, k).tobytes()))
+                 for k in ("points_mm", "colors", "counts", "free_cells"))
+    assert sum(len(raw[k]["data"]) for k in ("points_mm", "colors", "counts",
+                                             "free_cells")) < 0.9 * level3
+
+
+def test_unknown_or_misplaced_array_filter_is_refused() -> None:
+    obj = _raw(_samples()[5])  # the submap
+    obj["counts"]["f"] = "reverse"
+    with pytest.raises(DecodeError, match="filter"):
+        decode(_pack(obj))
+    obj = _raw(_samples()[1])  # a camera frame: delta is for integers only
+    obj["depth_m"]["f"] = "delta"
+    with pytest.raises(DecodeError, match="filter"):
+        decode(_pack(obj))

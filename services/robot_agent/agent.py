@@ -62,6 +62,10 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 SUBMAP_IDS_PER_EPOCH = 10_000
+# teammates keep the last odometry statistics they got: a pose carries them when they changed
+# and at least this often (for a teammate that starts late), not at every tick (7 floats of
+# a 220-byte pose, 10 times a second)
+STATS_REFRESH_TICKS = 50
 
 
 @dataclass(frozen=True)
@@ -119,6 +123,7 @@ class AgentCore:
         self.nav = Navigator(config, tick_s)
         self.teammates: dict[int, RobotPose] = {}
         self.teammates_prev: dict[int, RobotPose] = {}  # the one before, for the velocity
+        self.stats_sent: tuple[int, list[float]] | None = None  # (tick, odometry stats)
         self.yields = YieldRule(config, robot_id)
         self.frames_skipped = 0  # frames dropped while waiting for the team's poses
         self.drf = drf_params(config)
@@ -396,6 +401,16 @@ class AgentCore:
         self.grid.update(transform_xy(T_world_base, free_base), occupied_world)
         return out
 
+    def _stats_to_send(self, stats: list[float] | None, tick: int) -> list[float] | None:
+        """`stats` when they changed since they were last sent or STATS_REFRESH_TICKS have
+        passed, else None (teammates keep what they have: `OdometryCalibration.receive`)."""
+        last = self.stats_sent
+        if stats is None or (last is not None and last[1] == stats
+                             and tick - last[0] < STATS_REFRESH_TICKS):
+            return None
+        self.stats_sent = (tick, stats)
+        return stats
+
     def _outputs(
         self, odom: Odometry, pose_world: tuple[float, float, float], deltas: list[SubmapDelta],
         events: list[StatusEvent], cmd: Command,
@@ -406,7 +421,7 @@ class AgentCore:
                 x=pose_world[0], y=pose_world[1], yaw=pose_world[2]), state=self.nav.state,
             wall_direction_rad=walls.shared(xyyaw_from_T(self.T_world_loc)[2])
             if (walls := self.localizer.walls) is not None else None,
-            odometry_stats=odometry.calibration.shared()
+            odometry_stats=self._stats_to_send(odometry.calibration.shared(), tick)
             if (odometry := self.localizer.odometry) is not None else None,
         ))]
         for delta in deltas:
