@@ -141,7 +141,7 @@ def main() -> None:
     for name, s in stages.items():
         print(f"| {name} | {1e3 * np.median(s):.2f} | {1e3 * np.percentile(s, 90):.2f} |")
     print(f"\nsubmap traffic: {submap_bytes / 1e3 / (ticks * TICK_S):.1f} kB per sim second "
-          f"({core.seq} messages, {core.mapper.next_id} submaps)")
+          f"({core.outbox.seq} messages, {core.mapper.next_id} submaps)")
 
 
 if __name__ == "__main__":

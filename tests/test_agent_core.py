@@ -105,11 +105,11 @@ def test_edge_away_explores_own_frontiers_and_resends_on_return() -> None:
     _, ticks = _run(core, 4)
     assert core.nav.goal is not None and core.nav.goal.goal_id >= (1 << 30)
     assert not any(o.topic == "goal_status" for outs in ticks for o in outs)  # own goals only
-    sent_before = core.seq
+    sent_before = core.outbox.seq
     core.on_edge_presence(True)
     outs = core.on_odometry(_odom(100, (0.0, 0.0, 0.0)))
     full = [o.message for o in outs if o.topic == "submap"]
-    assert full and core.seq > sent_before
+    assert full and core.outbox.seq > sent_before
     n_voxels = sum(len(s) for s in [*core.mapper.done, core.mapper.current])
     assert sum(m.points_mm.shape[1] for m in full) >= n_voxels  # every voxel again
     assert outs[-1].topic == "cmd_vel"
@@ -180,7 +180,7 @@ def test_poses_carry_the_odometry_statistics_when_they_change_and_every_refresh(
     """Teammates keep the last statistics they got, so a pose carries them on the first tick,
     when they changed, and every STATS_REFRESH_TICKS (a teammate that starts late), and
     otherwise none: the same knowledge at every teammate for a tenth of the bytes."""
-    from services.robot_agent.agent import STATS_REFRESH_TICKS
+    from services.robot_agent.outbox import STATS_REFRESH_TICKS
 
     core = AgentCore(AgentConfig(), 0, 0.1)
     calibration = core.localizer.odometry.calibration
@@ -190,11 +190,11 @@ def test_poses_carry_the_odometry_statistics_when_they_change_and_every_refresh(
     for tick in range(31 + 2 * STATS_REFRESH_TICKS):
         if tick == 30:
             own[0] = 0.5  # a calibration segment closed
-        sent.append(core._stats_to_send(calibration.shared(), tick))
+        sent.append(core.outbox.stats_to_send(calibration.shared(), tick))
     ticks = [k for k, stats in enumerate(sent) if stats is not None]
     assert ticks == [0, 30, 30 + STATS_REFRESH_TICKS, 30 + 2 * STATS_REFRESH_TICKS]
     assert sent[30] == [0.5] + [0.0] * 6
-    assert core._stats_to_send(None, 500) is None  # not pooled: never
+    assert core.outbox.stats_to_send(None, 500) is None  # not pooled: never
 
 
 def _turn_cmds(core: AgentCore, removed: float, ticks: int) -> list[CmdVel]:

@@ -22,18 +22,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from schemas.messages import (
-    CmdVel,
     Correction,
     Goal,
-    GoalStatus,
     Inventory,
-    Message,
     OccupancyGrid,
     Odometry,
-    Pose2D,
     RgbdFrame,
     RobotPose,
-    Submap,
 )
 from services.common.geometry import (
     T_from_xyyaw,
@@ -46,11 +41,12 @@ from services.common.inventory import inventory_of
 from services.robot_agent.awareness import in_view_partial, visible_paper
 from services.robot_agent.config import AgentConfig
 from services.robot_agent.drf import filter_mask
-from services.robot_agent.exploration import LOCAL_GOAL_BASE, LocalExplorer
+from services.robot_agent.exploration import LocalExplorer
 from services.robot_agent.local_grid import LocalGrid, floor_rays
 from services.robot_agent.local_map import KeyframeMapper, SubmapDelta
 from services.robot_agent.localization import Localizer
 from services.robot_agent.navigation import Command, Navigator, StatusEvent
+from services.robot_agent.outbox import Outbox, Outgoing, TickResult
 from services.robot_agent.params import drf_params, loop_params, registration_params
 from services.robot_agent.projection import cam_to_base, depth_to_points, hfov_of, pixel_colors
 from services.robot_agent.teammates import predict_xy, teammates_xy
@@ -62,18 +58,6 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 SUBMAP_IDS_PER_EPOCH = 10_000
-# teammates keep the last odometry statistics they got: a pose carries them when they changed
-# and at least this often (for a teammate that starts late), not at every tick (7 floats of
-# a 220-byte pose, 10 times a second)
-STATS_REFRESH_TICKS = 50
-
-
-@dataclass(frozen=True)
-class Outgoing:
-    """A message to publish on the robot's `topic` key (pose, submap, goal_status, cmd_vel)."""
-
-    topic: str
-    message: Message
 
 
 @dataclass(frozen=True)
@@ -123,7 +107,6 @@ class AgentCore:
         self.nav = Navigator(config, tick_s)
         self.teammates: dict[int, RobotPose] = {}
         self.teammates_prev: dict[int, RobotPose] = {}  # the one before, for the velocity
-        self.stats_sent: tuple[int, list[float]] | None = None  # (tick, odometry stats)
         self.yields = YieldRule(config, robot_id)
         self.frames_skipped = 0  # frames dropped while waiting for the team's poses
         self.drf = drf_params(config)
@@ -131,7 +114,7 @@ class AgentCore:
         self.edge_alive = True  # assumed until its liveliness token is seen to go
         self.resend_pending = False
         self.explorer = LocalExplorer(config, robot_id)
-        self.seq = 0
+        self.outbox = Outbox(robot_id, config.cell_m)
 
     # -- inputs that only update state -------------------------------------------------------
     def on_rgbd(self, frame: RgbdFrame) -> None:
@@ -251,7 +234,13 @@ class AgentCore:
                                 teammates_xy(self.teammates))
         events += [event] if event is not None else []
         self._adopt_queued(events)
-        return self._outputs(odom, pose_world, deltas, events, cmd)
+        walls, odometry = self.localizer.walls, self.localizer.odometry
+        return self.outbox.messages(TickResult(
+            tick=odom.tick, stamp_ns=odom.stamp_ns, pose_world=pose_world, state=self.nav.state,
+            wall_direction_rad=walls.shared(xyyaw_from_T(self.T_world_loc)[2])
+            if walls is not None else None,
+            odometry_stats=odometry.calibration.shared() if odometry is not None else None,
+            deltas=deltas, events=events, cmd=cmd), self.T_world_loc, self.epoch or 0)
 
     def _hold_hidden_turn(self, cmd: Command) -> Command:
         """No command while a turn in place (and, with `hidden_hold_driving`, any motion)
@@ -400,52 +389,3 @@ class AgentCore:
         occupied_world = transform_xy(T_world_base, points_base[band, :2])
         self.grid.update(transform_xy(T_world_base, free_base), occupied_world)
         return out
-
-    def _stats_to_send(self, stats: list[float] | None, tick: int) -> list[float] | None:
-        """`stats` when they changed since they were last sent or STATS_REFRESH_TICKS have
-        passed, else None (teammates keep what they have: `OdometryCalibration.receive`)."""
-        last = self.stats_sent
-        if stats is None or (last is not None and last[1] == stats
-                             and tick - last[0] < STATS_REFRESH_TICKS):
-            return None
-        self.stats_sent = (tick, stats)
-        return stats
-
-    def _outputs(
-        self, odom: Odometry, pose_world: tuple[float, float, float], deltas: list[SubmapDelta],
-        events: list[StatusEvent], cmd: Command,
-    ) -> list[Outgoing]:
-        rid, tick = self.robot_id, odom.tick
-        out = [Outgoing("pose", RobotPose(
-            robot_id=rid, tick=tick, stamp_ns=odom.stamp_ns, pose_world=Pose2D(
-                x=pose_world[0], y=pose_world[1], yaw=pose_world[2]), state=self.nav.state,
-            wall_direction_rad=walls.shared(xyyaw_from_T(self.T_world_loc)[2])
-            if (walls := self.localizer.walls) is not None else None,
-            odometry_stats=self._stats_to_send(odometry.calibration.shared(), tick)
-            if (odometry := self.localizer.odometry) is not None else None,
-        ))]
-        for delta in deltas:
-            out.append(Outgoing("submap", self._submap_message(delta, tick, odom.stamp_ns)))
-        for ev in events:
-            if ev.goal_id >= LOCAL_GOAL_BASE:  # the agent's own goal: the edge never knew it
-                continue
-            log.info("robot %d goal %d: %s %s", rid, ev.goal_id, ev.status, ev.reason)
-            out.append(Outgoing("goal_status", GoalStatus(
-                robot_id=rid, tick=tick, goal_id=ev.goal_id, status=ev.status, reason=ev.reason,
-            )))
-        out.append(Outgoing("cmd_vel", CmdVel(
-            robot_id=rid, tick=tick, v_mps=cmd.v_mps, omega_radps=cmd.omega_radps,
-        )))
-        return out
-
-    def _submap_message(self, delta: SubmapDelta, tick: int, stamp_ns: int) -> Submap:
-        msg = Submap(
-            robot_id=self.robot_id, epoch=self.epoch or 0, submap_id=delta.submap_id,
-            seq=self.seq, tick=tick, stamp_ns=stamp_ns,
-            T_world_submap=self.T_world_loc @ delta.T_odom_submap,
-            points_mm=delta.points_mm, colors=delta.colors, counts=delta.counts,
-            free_cells=delta.free_cells, cell_m=self.config.cell_m,
-            offsets=delta.offsets, offset_levels=delta.offset_levels,
-        )
-        self.seq += 1
-        return msg
