@@ -64,8 +64,8 @@ def instrument(planner: EdgePlanner, timer: StageTimer) -> None:
     planner.grid.update = timer.wrap("merged grid update", planner.grid.update)
     planner._frontiers = timer.wrap("frontiers (2D or 3D)", planner._frontiers)
     planner.book.plan = timer.wrap("goal book: assignment", planner.book.plan)
+    # the goal cells' lookups (frontiers.GoalTransform) run inside the frontier stages
     for name, stage in (("RobotFields", "robot distance fields"),
-                        ("goal_transform", "goal transform (EDT)"),
                         ("detect_spatial_frontiers", "- 3D F_u/F_w regions")):
         setattr(planner_mod, name, timer.wrap(stage, getattr(planner_mod, name)))
 
