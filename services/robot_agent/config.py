@@ -65,9 +65,9 @@ class AgentConfig(BaseModel):
         "doorway registrations by up to 0.65° even on a perfect map)"
     )
     reg_degenerate_ratio: float = Field(
-        default=0.05, ge=0, lt=1, description="weak/strong translation information below this: "
-        "keep odometry along the weak direction (aisles, one wall); 0 = never"
-    )
+        default=0.05, ge=0, lt=1, description="with reg_fusion=gate: weak/strong translation "
+        "information below this keeps odometry along the weak direction (aisles, one wall); 0 = "
+        "never. The filter weighs the weak direction by its covariance instead")
     # bench/bench_localization.py replays of noisy house missions (docs/agent.md, "Drift
     # filter"): robots whose pose error passed 8 cm, 2 of 18 with the jump gate, 0 of 21 with
     # the filter, 30-point frames and 15 % inliers (team map BV median 0.17 % → 0 %)
