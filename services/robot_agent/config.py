@@ -173,10 +173,14 @@ class AgentConfig(BaseModel):
         default=0.02, gt=0, description="heading error per √rad turned the drift filter "
         "expects of the odometry (its process noise; 0.02 covers a 1 % turn-scale error and "
         "the 1 % random walk)")
+    # 0.01 let a registration walk the heading 1.6° in 2 s of straight driving along a
+    # corridor the walls did not help with (AWS house), each frame taking 75 % of the yaw it
+    # asked; the calibrated wheels drift far less (docs/agent.md, "A heading the registration
+    # walks away with")
     odom_heading_sigma_per_sqrt_m: float = Field(
-        default=0.01, gt=0, description="heading error per √m driven the drift filter expects "
-        "of the odometry (its process noise; the simulator's heading bias is 0.005 rad/m, "
-        "which the calibration learns)")
+        default=0.003, gt=0, description="heading error per √m driven the drift filter expects "
+        "of the odometry (its process noise; the simulator's heading bias of 0.005 rad/m is "
+        "learned by the calibration, what is left is a fraction of it)")
     odom_calibration_segment_m: float = Field(
         default=1.0, gt=0, description="a calibration segment closes after this much driving")
     reg_align_max_range_m: float = Field(
