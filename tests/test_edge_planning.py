@@ -202,9 +202,12 @@ def test_closed_room_completes_and_open_one_does_not() -> None:
 
 def test_space_falls_back_to_grid_frontiers_instead_of_completing() -> None:
     """Free floor (its whole rim unknown) but no 3D region (no voxels): without the fallback
-    the SPACE planner assigns nothing and completes; with it the grid's frontier is a goal."""
+    the SPACE planner assigns nothing and completes; with it the grid's frontier is a goal.
+    (The endgame's unseen floor would offer the floor itself: off here, see
+    test_edge_unseen_floor.py.)"""
     def planner_for(fallback: bool) -> EdgePlanner:
-        p = EdgePlanner(EdgeConfig(planner="space", space_grid_fallback=fallback), tick_s=0.1)
+        p = EdgePlanner(EdgeConfig(planner="space", space_grid_fallback=fallback,
+                                   floor_unseen_min_m2=0.0), tick_s=0.1)
         cols, rows = np.meshgrid(np.arange(0, 80), np.arange(20, 30))
         free = np.stack([cols.ravel(), rows.ravel()], axis=1)
         p.on_submap(make_submap(0, 0, 0, 1, np.eye(4), np.zeros((0, 3)), free))
@@ -224,7 +227,8 @@ def test_space_falls_back_to_grid_frontiers_instead_of_completing() -> None:
 
 def test_grid_fallback_ignores_frontiers_shorter_than_its_minimum() -> None:
     p = EdgePlanner(EdgeConfig(planner="space", space_grid_fallback=True,
-                               space_grid_fallback_min_cells=200), tick_s=0.1)
+                               space_grid_fallback_min_cells=200, floor_unseen_min_m2=0.0),
+                    tick_s=0.1)
     cols, rows = np.meshgrid(np.arange(0, 80), np.arange(20, 30))
     p.on_submap(make_submap(0, 0, 0, 1, np.eye(4), np.zeros((0, 3)),
                             np.stack([cols.ravel(), rows.ravel()], axis=1)))

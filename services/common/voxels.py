@@ -33,6 +33,12 @@ def z_of(keys: np.ndarray) -> np.ndarray:
     return (np.asarray(keys, dtype=np.int64) & _MASK) - _OFFSET
 
 
+def xy_of(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) int64 x and y indices of each key (unpack's first two columns, without z)."""
+    keys = np.asarray(keys, dtype=np.int64)
+    return ((keys >> (2 * _BITS)) & _MASK) - _OFFSET, ((keys >> _BITS) & _MASK) - _OFFSET
+
+
 def unpack(keys: np.ndarray) -> np.ndarray:
     """(N,) int64 keys → (N, 3) int64 indices."""
     keys = np.asarray(keys, dtype=np.int64)

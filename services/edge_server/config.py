@@ -52,6 +52,28 @@ class EdgeConfig(BaseModel):
         "however far from unknown grid cells: the unseen floor inside rooms the grid already "
         "calls free (None: every F_u region must be near unknown space)")
     frontier_z_max_m: float = Field(default=1.5, description="voxels above are never frontiers")
+    floor_unseen_min_m2: float = Field(
+        default=1.0, ge=0, description="`space`: free grid cells with no returned floor "
+        "nearby, in patches of at least this area, are F_u regions too (0 = off; "
+        "unseen_floor.py; docs/edge.md \"Floor the cameras never returned\")")
+    floor_unseen_when: Literal["always", "endgame"] = Field(
+        default="endgame", description="unseen floor patches compete with the other regions "
+        "always, or only once the assignable F_u regions are down to "
+        "complete_unexplored_fraction of the map (none left included)")
+    floor_endgame_grid_frontiers: bool = Field(
+        default=True, description="... and in that endgame the grid's frontier clusters of "
+        "space_grid_fallback_min_cells or more join them too")
+    floor_z_m: float = Field(default=0.1, description="voxels whose centre is at most this "
+                             "high are floor returns")
+    floor_seen_radius_m: float = Field(default=0.1, ge=0, description="a cell this close to a "
+                                       "floor return counts as seen")
+    floor_seen_window_m: float = Field(default=0.5, ge=0, description="... and a free cell "
+                                       "is seen when enough of this window around it is")
+    floor_seen_min_fraction: float = Field(default=0.5, ge=0, le=1, description="the "
+                                           "fraction of the window's free cells that must be "
+                                           "seen")
+    floor_unseen_erode_m: float = Field(default=0.1, ge=0, description="unseen floor slivers "
+                                        "narrower than twice this are dropped")
     goal_max_offset_3d_m: float = Field(default=1.5, ge=0, description="f′ offset for 3D regions")
     # importance and revenue
     importance_lambda: float = Field(default=0.005, gt=0, description="λ, 1/s")

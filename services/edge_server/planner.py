@@ -50,11 +50,13 @@ from services.edge_server.robot_fields import InflationCache, RobotFields
 from services.edge_server.robot_views import robot_grid
 from services.edge_server.rrt import rrt_frontier_mask
 from services.edge_server.spatial_frontiers import (
+    concat,
     detect_spatial_frontiers,
     grid_as_unexplored,
     subset,
 )
 from services.edge_server.submap_store import SubmapStore
+from services.edge_server.unseen_floor import FULL_ENTROPY, unseen_floor_regions
 
 if TYPE_CHECKING:
     from services.edge_server.merger import MapMerger
@@ -126,6 +128,7 @@ class EdgePlanner:
         self._alg1_version = -1
         self._rrt_tree_xy = np.zeros((0, 2))  # the RRT's nodes, world (y, x) metres
         self._rrt_points_yx = np.zeros((0, 2))  # its frontier points not yet seen, likewise
+        self._floor_regions = 0  # unseen floor patches in the last plan (logged on change)
         self.inflation = InflationCache()
         self.visits = VisitLog(config.weak_visit_range_m, math.radians(config.weak_visit_fov_deg))
 
@@ -202,6 +205,7 @@ class EdgePlanner:
                                              self._point_frontiers(), goal_edt, snap.free)
             # F_w regions already seen from close by are not worth a trip (completion.py)
             fs = subset(fs, ~(fs.weak & self.visits.seen(fs.centroid_xy)))
+            fs = self._with_unseen_floor(fs, snap, reachable, goal_edt, tick)
             imp = importance(tick * self.tick_s, robot_xy, fs.centroid_xy, fs.weak,
                              cfg.importance_lambda, cfg.importance_xi_s)
             border = (frontier_length_near(snap.free, snap.known, fs.goal_rc, spec,
@@ -226,6 +230,41 @@ class EdgePlanner:
             mask = ndimage.binary_dilation(mask, np.ones((2 * link + 1,) * 2, bool)) & ~snap.known
             return frontier_set(mask, reachable, spec, 1, cfg.goal_max_offset_m, goal_edt)
         return detect_frontiers(snap.free, snap.known, reachable, spec, cfg, goal_edt)
+
+    def _with_unseen_floor(self, fs: FrontierSet, snap: GridSnapshot, reachable: np.ndarray,
+                           goal_edt: GoalTransform, tick: int) -> FrontierSet:
+        """`space` with `floor_unseen_min_m2`: the unseen floor patches join the regions
+        (unseen_floor.py), always or once the assignable F_u voxels are down to the tail's
+        fraction of the map; in that endgame the grid's long frontiers join them too
+        (`floor_endgame_grid_frontiers`), so the tail rule does not end a mission beside a
+        hole in the grid that the fallback would have sent a robot to."""
+        cfg = self.config
+        if cfg.planner != "space" or cfg.floor_unseen_min_m2 <= 0:
+            return fs
+        endgame = True
+        if len(fs):
+            assert fs.weak is not None
+            goal_rc = fs.goal_rc
+            usable = (self.book.allowed(fs, tick) & reachable[goal_rc[:, 0], goal_rc[:, 1]]
+                      & ~fs.weak)
+            endgame = fs.sizes[usable].sum() <= cfg.complete_unexplored_fraction * len(self.merged)
+        if cfg.floor_unseen_when == "endgame" and not endgame:
+            return fs
+        extra = unseen_floor_regions(self.merged.keys, self.merged.voxel_m, snap.free,
+                                     reachable, snap.spec, cfg, goal_edt)
+        floor_m2 = extra.sizes.sum() * snap.spec.resolution_m**2
+        if endgame and cfg.floor_endgame_grid_frontiers:
+            long_only = cfg.model_copy(
+                update={"frontier_min_cells": cfg.space_grid_fallback_min_cells})
+            grid = detect_frontiers(snap.free, snap.known, reachable, snap.spec, long_only,
+                                    goal_edt)
+            extra = concat(extra, replace(grid_as_unexplored(grid),
+                                          gain=np.full(len(grid), FULL_ENTROPY)))
+        if len(extra) != self._floor_regions:
+            log.info("t=%.1f s: %d endgame regions (unseen floor %.1f m²)",
+                     tick * self.tick_s, len(extra), floor_m2)
+            self._floor_regions = len(extra)
+        return concat(fs, extra) if len(extra) else fs
 
     def _fall_back_to_grid(self, fs: FrontierSet, fields: RobotFields, tick: int) -> bool:
         """SPACE planners with `space_grid_fallback`: no 3D region is usable this plan."""
