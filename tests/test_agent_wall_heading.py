@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -90,6 +91,19 @@ def test_one_long_rotated_thing_does_not_set_the_direction() -> None:
     alone = wall_direction(*_frame(corner + rng.normal(0, 0.003, corner.shape), (0.0, 0.0, 0.0)),
                            PARAMS)
     assert alone is not None and abs(math.degrees(alone.angle_rad)) < 0.1
+
+
+def test_two_walls_in_line_metres_apart_are_two_segments() -> None:
+    """Two wall patches 4.6 m apart along one line, 2.3 cm apart across it (two walls in
+    line, or one seen past an obstacle, with depth noise): fitted as one segment they turn
+    the direction by their offset over their distance; split at the gap each gives its own."""
+    rng = np.random.default_rng(0)
+    pts = np.concatenate([_wall(2.0, -3.0, 2.0, -2.3, rng), _wall(2.023, 2.3, 2.023, 3.0, rng)])
+    frame = _frame(pts + rng.normal(0.0, 0.003, pts.shape), (0.0, 0.0, 0.0))
+    joined = wall_direction(*frame, replace(PARAMS, along_gap_m=0.0))
+    assert joined is not None and abs(math.degrees(joined.angle_rad)) > 0.2
+    split = wall_direction(*frame, PARAMS)
+    assert split is not None and abs(math.degrees(split.angle_rad)) < 0.05
 
 
 def test_a_heading_pulls_yaw_and_the_position_its_error_swung() -> None:

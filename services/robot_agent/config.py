@@ -137,6 +137,10 @@ class AgentConfig(BaseModel):
         "learned wall direction lies more than this from the robots' median (teammates' arrive "
         "with their poses) takes the mean of those within it instead, rad (0.3°); 0 = each "
         "robot its own")
+    reg_wall_segment_max_gap_m: float = Field(
+        default=1.0, ge=0, description="with reg_wall_heading: a straight wall segment is "
+        "split where its points leave a gap this long along it (two walls in line, metres "
+        "apart, are not one line), m; 0 = never")
     reg_wall_reacquire_frames: int = Field(
         default=5, ge=0, description="with reg_wall_heading: this many wall headings in a row "
         "rejected by the χ² gate and agreeing within 0.5° make the filter take them (its yaw "

@@ -53,7 +53,8 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
                                        learn_max_sigma_rad=cfg.reg_wall_learn_max_sigma_rad,
                                        learn_frames=cfg.reg_wall_learn_frames,
                                        team_inlier_rad=cfg.reg_wall_team_inlier_rad or None,
-                                       reacquire_frames=cfg.reg_wall_reacquire_frames or None)
+                                       reacquire_frames=cfg.reg_wall_reacquire_frames or None,
+                                       along_gap_m=cfg.reg_wall_segment_max_gap_m)
         if cfg.reg_wall_heading else None,
     )
 
