@@ -17,6 +17,13 @@ def yield_command(core: AgentCore, pose_world: tuple[float, float, float], cmd: 
                                tick)
 
 
+def test_robots_face_to_face_plan_around_each_other_by_default() -> None:
+    """The default: a wait ends in a detour, not in goals the validator ends one by one."""
+    assert AgentConfig().yield_detour_ticks > 0
+    core = AgentCore(AgentConfig(), 2, 0.1, team_size=1)
+    assert _ticks_until_detour(core, teammate=1) == AgentConfig().yield_detour_ticks
+
+
 def _core(robot_id: int, detour_ticks: int = N) -> AgentCore:
     core = AgentCore(AgentConfig(yield_detour_ticks=detour_ticks), robot_id, 0.1, team_size=1)
     return core
@@ -42,7 +49,7 @@ def test_the_higher_id_detours_first_the_lower_id_later() -> None:
     assert _ticks_until_detour(_core(robot_id=1), teammate=2) == 3 * N
 
 
-def test_no_detour_by_default_and_none_without_a_teammate_ahead() -> None:
+def test_no_detour_when_off_and_none_without_a_teammate_ahead() -> None:
     assert _ticks_until_detour(_core(robot_id=2, detour_ticks=0), teammate=1) is None
     core = _core(robot_id=2)
     assert yield_command(core, (0.0, 0.0, 3.14), Command(0.5, 0.0), 0) == Command(0.5, 0.0)

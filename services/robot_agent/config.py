@@ -314,9 +314,10 @@ class AgentConfig(BaseModel):
     )
     yield_half_angle_rad: float = Field(default=math.pi / 3, ge=0)
     yield_detour_ticks: int = Field(
-        default=0, ge=0, description="after yielding this long to a teammate of lower id "
+        default=10, ge=0, description="after yielding this long to a teammate of lower id "
         "(3× as long to any), plan around it (0 = never: two robots face to face both yield "
-        "until the validator ends a goal)")
+        "until the validator ends a goal, and goal after goal through the same place; "
+        "docs/agent.md, 'Face to face at a shelf end')")
     detour_radius_m: float = Field(
         default=0.25, gt=0, description="a teammate blocks this radius of the planning grid "
         "while detouring (the robot's own radius is added by the inflation)")
