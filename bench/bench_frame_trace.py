@@ -7,7 +7,11 @@ walls did (fused / rejected so far, the heading change they made and the error b
 and the error of what registration measured. The truth is the run folder's
 `trajectory_R_gt.tum`, read here only: the agent never sees it.
 
-    .venv/bin/python bench/bench_frame_trace.py REC --robot 1 --from 12.5 --to 24
+    .venv/bin/python bench/bench_frame_trace.py REC --robot 1 --from 12.5 --to 24 \
+        [--set agent.K=V ...]
+
+With `--set`, the agent replays with those config overrides (open loop: the robot still
+drives the recorded path).
 """
 
 from __future__ import annotations
@@ -22,8 +26,10 @@ from scipy.spatial.transform import Rotation
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_agent_replay as replay_mod  # noqa: E402
+from bench_pose_replay import parse_sets  # noqa: E402
 
 from services.common.geometry import wrap_angle, xyyaw_from_T  # noqa: E402
+from services.config import load_config  # noqa: E402
 from services.robot_agent.agent import AgentCore  # noqa: E402
 
 
@@ -92,11 +98,14 @@ def main() -> None:
     ap.add_argument("--robot", type=int, default=0)
     ap.add_argument("--from", dest="t_from", type=float, default=0.0, help="sim s")
     ap.add_argument("--to", dest="t_to", type=float, default=math.inf, help="sim s")
+    ap.add_argument("--set", nargs="*", default=[], help="config overrides, dotted KEY=VALUE")
     args = ap.parse_args()
+    overrides = parse_sets(args.set)
     gt_path = args.rec / "run" / f"trajectory_{args.robot}_gt.tum"
     if not gt_path.exists():
         ap.error(f"{gt_path} not found: is {args.rec} a bench_agent_replay.py record folder?")
     true_pose = true_pose_at(np.loadtxt(gt_path, ndmin=2))
+    replay_mod.load_config = lambda path, extra: load_config(path, {**extra, **overrides})
     config = replay_mod.load_config(args.rec / "run" / "config.yaml", {})
     replay_mod.instrument = lambda core, timer: install(
         core, true_pose, args.t_from, args.t_to, config.sim.tick_s)

@@ -245,3 +245,20 @@ def test_driving_behind_teammates_is_held_only_where_asked() -> None:
             cmds.append(core.on_odometry(_odom(k, (0.0, 0.0, 0.0)))[-1].message)
         moved[hold_driving] = [c.v_mps > 0.0 for c in cmds[2:]]
     assert all(moved[False]) and not any(moved[True])
+
+
+def test_a_frame_whose_heading_is_unsure_maps_only_its_near_points() -> None:
+    """`map_heading_tolerance_m`: at a heading σ of 2° a wall 5 m away could be 17 cm out (a
+    ghost); the frame's points join the 3D map only within 0.03 m / σ (0.86 m here). The
+    frame still registers and still clears the grid; a sure heading maps every point."""
+    ranges = {}
+    for sigma_deg in (0.0, 2.0):
+        core = AgentCore(AgentConfig(map_heading_tolerance_m=0.03), 0, 0.1)
+        core.localizer.P[2, 2] = math.radians(sigma_deg) ** 2
+        core.on_rgbd(_frame(0, (0.0, 0.0, 0.0)))
+        core.on_odometry(_odom(0, (0.0, 0.0, 0.0)))
+        points = core.mapper.current.mean_points()
+        ranges[sigma_deg] = np.hypot(points[:, 0], points[:, 1])
+    assert ranges[0.0].max() > 4.5  # the far wall at x = 5 m
+    assert len(ranges[2.0]) and ranges[2.0].max() < 0.03 / math.radians(2.0) + 0.1
+    assert len(ranges[2.0]) < 0.5 * len(ranges[0.0])

@@ -288,3 +288,48 @@ def test_driving_straight_a_registration_turns_the_heading_only_in_part() -> Non
     out = fuse(np.array([2.1, 0, 0]), P, np.array([2.1, 0, off]), R, filt)
     assert out.accepted
     assert 0.0 < out.xyyaw[2] < off / 2
+
+
+def _box(rng: np.random.Generator) -> np.ndarray:
+    """A small box of walls inside `_room`, 0.7 m or more from its walls: a frame of it
+    matches nothing the room's map holds (new ground after a turn)."""
+    return np.concatenate([_wall(-1.2, -0.8, 1.2, -0.8, rng), _wall(-1.2, 0.8, 1.2, 0.8, rng),
+                           _wall(-1.2, -0.8, -1.2, 0.8, rng), _wall(1.2, -0.8, 1.2, 0.8, rng)])
+
+
+def _after_a_hidden_turn(params: RegistrationParams, sigma_deg: float) -> Localizer:
+    """A localizer with two frames of the room in its map, whose heading σ is `sigma_deg`."""
+    rng = np.random.default_rng(7)
+    loc = Localizer(params)
+    room = _room(rng)
+    for _ in range(2):
+        loc.update(_seen(room, np.eye(4)), np.eye(4))
+    assert loc.registrar.n_inserted == 2
+    loc.P[2, 2] = math.radians(sigma_deg) ** 2
+    return loc
+
+
+def test_a_frame_that_did_not_register_joins_the_map_only_while_the_heading_is_sure() -> None:
+    """AWS house, six robots, seed 0: after a turn behind teammates (heading 1.35° off, σ
+    0.93°) a frame GICP did not converge on joined the map at that heading; the next frames
+    registered against it, agreed with it, and the filter took the error as certain (σ
+    0.18°). The walls' correction 4 s later was fought off by the map, and the position jumped
+    5 cm. With `unregistered_insert_max_sigma_rad` such a frame stays out of the map."""
+    box = _box(np.random.default_rng(8))
+    off = T_from_xyyaw(0.0, 0.0, math.radians(1.4))  # the odometry's heading after the turn
+    gated = RegistrationParams(map_voxel_m=0.05, min_points=30, filter=PARAMS,
+                               unregistered_insert_max_sigma_rad=math.radians(0.5))
+    unsure = _after_a_hidden_turn(gated, 1.5)
+    out = unsure.update(_seen(box, np.eye(4)), off)
+    assert out.reason in ("few inliers", "not converged")
+    assert unsure.registrar.n_inserted == 2 and unsure.n_held_out == 1
+    sure = _after_a_hidden_turn(gated, 0.1)  # a frame of new ground at a sure heading: joins
+    assert not sure.update(_seen(box, np.eye(4)), np.eye(4)).accepted
+    assert sure.registrar.n_inserted == 3
+    default = _after_a_hidden_turn(replace(gated, unregistered_insert_max_sigma_rad=0.0), 1.5)
+    default.update(_seen(box, np.eye(4)), off)
+    assert default.registrar.n_inserted == 3  # off: every such frame joins
+    capped = _after_a_hidden_turn(replace(gated, unregistered_insert_max_held=2), 1.5)
+    for _ in range(3):  # two frames kept out, then one joins whatever the σ
+        capped.update(_seen(box, np.eye(4)), off)
+    assert capped.registrar.n_inserted == 3 and capped.n_held_out == 0

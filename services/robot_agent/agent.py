@@ -357,6 +357,14 @@ class AgentCore:
                       np.round(np.sqrt(np.diag(self.localizer.P)), 4))
         return out.T_loc_base
 
+    def _surely_placed(self, points_base: np.ndarray) -> np.ndarray | slice:
+        """The points the heading's σ places within `map_heading_tolerance_m` (all: a slice)."""
+        tolerance = self.config.map_heading_tolerance_m
+        sigma = math.sqrt(max(float(self.localizer.P[2, 2]), 0.0))
+        if tolerance <= 0 or sigma <= 0:
+            return slice(None)
+        return np.hypot(points_base[:, 0], points_base[:, 1]) * sigma <= tolerance
+
     def _integrate(
         self, frame: RgbdFrame, cam, points_base: np.ndarray, T_loc_base: np.ndarray,
         T_world_base: np.ndarray, tick: int,
@@ -379,9 +387,10 @@ class AgentCore:
         floor = points_base[:, 2] <= cfg.obstacle_z_min_m  # the scan's rays cover floor hits
         assert self.mapper.current is not None
         T_submap_base = invert(self.mapper.current.T_odom_submap) @ T_loc_base
+        sure = self._surely_placed(points_base)
         self.mapper.integrate(
-            transform_points(T_submap_base, points_base),
-            pixel_colors(frame.rgb, cam),
+            transform_points(T_submap_base, points_base[sure]),
+            pixel_colors(frame.rgb, cam)[sure],
             transform_xy(T_submap_base, free_base),
         )
         band = ~floor & (points_base[:, 2] <= cfg.obstacle_z_max_m)

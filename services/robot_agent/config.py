@@ -40,6 +40,11 @@ class AgentConfig(BaseModel):
     # -- localization ----------------------------------------------------------------------
     registration: bool = Field(default=True, description="refine odometry by frame-to-map GICP")
     register_every_frames: int = Field(default=1, ge=1)
+    map_heading_tolerance_m: float = Field(
+        default=0.0, ge=0, description="a frame's points join the 3D map only within the "
+        "range at which the filter's heading σ moves them this far (m; 0 = all points): a "
+        "frame 2° off puts a wall 4 m away 14 cm out, a ghost, while the robot is still "
+        "lost (docs/agent.md, \"A frame the map should not keep\")")
     # A fixed 8 cm / 0.05 rad gate and a map that never forgets beat the motion-scaled gate
     # with a 100-frame map in 300 s house missions: BV 5.8 % vs 17.9 %, drift ≤ 0.19 m / 2.1°
     # vs 0.36 m / 3.5° (docs/agent.md, "Registration gate").
@@ -149,6 +154,17 @@ class AgentConfig(BaseModel):
         default=False, description="GICP's pose on a frame it did not converge on (15 "
         "iterations) is fused by the filter like a converged one; false: the frame keeps the "
         "odometry guess and joins the map there")
+    reg_unregistered_insert_max_sigma_rad: float = Field(
+        default=0.0, ge=0, description="a frame that did not register (not converged, few "
+        "inliers) joins a non-empty registration map at the odometry guess only while the "
+        "filter's heading σ is at most this, rad (0 = always): after a turn behind teammates "
+        "the guess can be 1-1.5° off, and the map would keep it (docs/agent.md, \"A frame "
+        "the map should not keep\")")
+    reg_unregistered_insert_max_held: int = Field(
+        default=50, ge=0, description="with reg_unregistered_insert_max_sigma_rad: after this "
+        "many frames in a row kept out, the next unregistered one joins whatever the σ (a "
+        "robot far from anything its map holds, with no walls to take its heading, still "
+        "builds a map to register against)")
     reg_insert_min_m: float = Field(
         default=0.0, ge=0, description="a registered frame joins the registration map only "
         "this far from the last one that did (0 = every frame)")

@@ -10,6 +10,7 @@ so the edge's corrections (T_world_submap) give T_world_loc.
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from dataclasses import replace
 
@@ -52,6 +53,7 @@ class Localizer:
         self.P = np.zeros((3, 3))  # covariance of T_loc_base (x, y, yaw): the start is known
         self._T_odom_prev: np.ndarray | None = None
         self._wall_turn: tuple[float, float] | None = None  # this frame's (yaw before, after)
+        self.n_held_out = 0  # unregistered frames in a row kept out of the map (σ too large)
         # each rejected registration's T_loc_base and its frame's T_odom_base (x, y, yaw)
         self._rejected: list[tuple[np.ndarray, np.ndarray]] = []
         self.odometry = (CalibratedOdometry(params.calibration)
@@ -176,6 +178,20 @@ class Localizer:
         return T_odom_base, replace(filt, q_rad2=q_odom * q_scan / (q_odom + q_scan),
                                     q_rad2_per_rad=0.0, q_rad2_per_m=0.0)
 
+    def _sure_enough_to_insert(self) -> bool:
+        """Whether an unregistered frame may join the map at the guess: its heading σ is
+        within `unregistered_insert_max_sigma_rad`. A frame inserted 1.4° off (a turn behind
+        teammates) becomes what the next frames register against, and they agree with it."""
+        params = self.registrar.params
+        limit = params.unregistered_insert_max_sigma_rad
+        if limit <= 0 or math.sqrt(max(float(self.P[2, 2]), 0.0)) <= limit \
+                or self.n_held_out >= params.unregistered_insert_max_held:
+            self.n_held_out = 0
+            return True
+        self.n_held_out += 1
+        self.outcomes["kept out of the map"] += 1
+        return False
+
     def _align_cloud(self, points_base: np.ndarray) -> small_gicp.PointCloud | None:
         """The frame's points within `align_max_range_m`, downsampled (None: all of them)."""
         max_range = self.registrar.params.align_max_range_m
@@ -198,7 +214,8 @@ class Localizer:
             return RegistrationOutcome(guess, False, "empty map")
         aligned = reg.align(cloud if align_cloud is None else align_cloud, guess)
         if isinstance(aligned, str):  # new ground the map does not cover yet: keep odometry
-            if aligned != "not converged" or reg.params.insert_unconverged:
+            if (aligned != "not converged" or reg.params.insert_unconverged) and \
+                    self._sure_enough_to_insert():
                 reg.insert(cloud, guess)
             return RegistrationOutcome(guess, False, aligned)
         T_reg, H, inliers = aligned

@@ -24,6 +24,8 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
         max_removed_frac=cfg.reg_max_removed_frac, min_points=cfg.reg_min_points,
         insert_min_m=cfg.reg_insert_min_m, insert_min_rad=cfg.reg_insert_min_rad,
         use_unconverged=cfg.reg_use_unconverged,
+        unregistered_insert_max_sigma_rad=cfg.reg_unregistered_insert_max_sigma_rad,
+        unregistered_insert_max_held=cfg.reg_unregistered_insert_max_held,
         reset_on_wall_reacquire=cfg.reg_wall_reacquire_reset,
         reset_on_wall_conflict_rad=cfg.reg_wall_reset_conflict_rad,
         max_corr_m=cfg.reg_max_corr_m,

@@ -68,6 +68,9 @@ class RegistrationParams:
     # with the filter: a frame GICP did not converge on joins the map at the odometry guess
     # (False: it stays out, as frames of new ground do not)
     insert_unconverged: bool = True
+    # with the filter: ... and only while the filter's heading σ is at most this (rad; 0 = any)
+    unregistered_insert_max_sigma_rad: float = 0.0
+    unregistered_insert_max_held: int = 50  # ... for at most this many frames in a row
     # with the filter: GICP's pose on a frame it did not converge on is a measurement like any
     # other (the filter weighs and gates it); False: the frame keeps the odometry guess
     use_unconverged: bool = False
