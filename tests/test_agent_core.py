@@ -253,7 +253,7 @@ def test_a_frame_whose_heading_is_unsure_maps_only_its_near_points() -> None:
     frame still registers and still clears the grid; a sure heading maps every point."""
     ranges = {}
     for sigma_deg in (0.0, 2.0):
-        core = AgentCore(AgentConfig(map_heading_tolerance_m=0.03), 0, 0.1)
+        core = AgentCore(AgentConfig(), 0, 0.1)  # the default tolerance, 0.03 m
         core.localizer.P[2, 2] = math.radians(sigma_deg) ** 2
         core.on_rgbd(_frame(0, (0.0, 0.0, 0.0)))
         core.on_odometry(_odom(0, (0.0, 0.0, 0.0)))

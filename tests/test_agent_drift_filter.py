@@ -329,6 +329,8 @@ def test_a_frame_that_did_not_register_joins_the_map_only_while_the_heading_is_s
     default = _after_a_hidden_turn(replace(gated, unregistered_insert_max_sigma_rad=0.0), 1.5)
     default.update(_seen(box, np.eye(4)), off)
     assert default.registrar.n_inserted == 3  # off: every such frame joins
+    assert math.isclose(registration_params(AgentConfig()).unregistered_insert_max_sigma_rad,
+                        math.radians(0.5), rel_tol=0.01)  # on by default
     capped = _after_a_hidden_turn(replace(gated, unregistered_insert_max_held=2), 1.5)
     for _ in range(3):  # two frames kept out, then one joins whatever the σ
         capped.update(_seen(box, np.eye(4)), off)
