@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from services.common.grid import GridSpec
 from services.evaluator import metrics as mx
@@ -35,6 +36,28 @@ def test_overlap_3d(gt: np.ndarray) -> None:
     # Both robots reach 0.7 < x < 1.3 (radius 0.10) → 30 % of the covered plane.
     assert mx.overlap_3d([a, b], gt) == pytest.approx(30.0, abs=1.5)
     assert mx.overlap_3d([a], gt) == 0.0
+
+
+def test_covered_mask_is_the_kd_trees_answer_for_every_truth_point() -> None:
+    """The cell pre-pass (truth sharing a small cell with a map point is covered unasked)
+    gives the mask a radius query of every truth point gives, points at the radius
+    included; and it does ask the tree (some truth points lie beyond every shared cell)."""
+    rng = np.random.default_rng(3)
+    for radius in (0.05, 0.10, 0.2):
+        map_pts = rng.uniform(-2.0, 2.0, (4000, 3))
+        truth = np.concatenate([rng.uniform(-2.0, 2.0, (20000, 3)),
+                                map_pts[:500] + radius * _unit(rng, 500),
+                                map_pts[500:1000] + np.nextafter(radius, 0) * _unit(rng, 500)])
+        dist, _ = cKDTree(map_pts).query(truth, distance_upper_bound=radius)
+        mask = mx.covered_mask(map_pts, truth, radius)
+        assert np.array_equal(mask, np.isfinite(dist))
+        assert 0 < mask.sum() < len(truth)
+    assert not mx.covered_mask(np.zeros((0, 3)), truth, 0.1).any()
+
+
+def _unit(rng: np.random.Generator, n: int) -> np.ndarray:
+    v = rng.normal(size=(n, 3))
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
 def test_rmse_perfect_map_is_sampling_error(gt: np.ndarray) -> None:
