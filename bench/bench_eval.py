@@ -1,6 +1,8 @@
 """Benchmark the evaluator: ground truth of the AWS house and metrics on a 200k-point map.
 
 Run: .venv/bin/python bench/bench_eval.py  (prints a markdown table; medians of --repeat runs)
+     .venv/bin/python bench/bench_eval.py --run RUN_DIR  (the scoring a mission ends with: a
+     finished run folder's metrics, as `spacemap run` computes them after the last tick)
 """
 
 from __future__ import annotations
@@ -15,7 +17,9 @@ import mujoco
 import numpy as np
 
 from services.evaluator import metrics as mx
+from services.evaluator import run_files as rf
 from services.evaluator.config import EvalConfig
+from services.evaluator.evaluate import RunConfig, evaluate_run_folder, probe_for
 from services.evaluator.free_space import reachable_free_grid
 from services.evaluator.gazebo_map import compare_with_ros_map, load_ros_map
 from services.evaluator.ground_truth import GroundTruth
@@ -40,8 +44,13 @@ def timed(fn: Callable[[], object], repeat: int) -> tuple[float, object]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--run", type=Path, default=None,
+                        help="time the end-of-mission scoring of this finished run folder")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(message)s")
+    if args.run is not None:
+        time_run_folder(args.run, args.repeat)
+        return
     model = mujoco.MjModel.from_xml_path(str(AWS / "small_house.xml"))
     rows: list[tuple[str, float, str]] = []
     t, grid = timed(lambda: reachable_free_grid(model, SPAWN), args.repeat)
@@ -74,6 +83,20 @@ def main() -> None:
     lines = ["| step | median s | result |", "|---|---:|---|"]
     lines += [f"| {name} | {t:.3f} | {result} |" for name, t, result in rows]
     log.info("\n".join(lines))
+
+
+def time_run_folder(run_dir: Path, repeat: int) -> None:
+    """The launcher's scoring after the last tick (its probe, ground truth loaded, is warm
+    from the mission), and whether it gives the run's metrics.json."""
+    config = RunConfig.read(run_dir / "config.yaml")
+    probe = probe_for(config.sim)
+    t_first, metrics = timed(lambda: evaluate_run_folder(run_dir, probe), 1)
+    t, metrics = timed(lambda: evaluate_run_folder(run_dir, probe), repeat)
+    same = metrics == {**rf.read_json(run_dir / rf.METRICS), "wall_time_s": metrics["wall_time_s"]}
+    log.info("| step | median s | result |\n|---|---:|---|\n"
+             "| scoring, first call (trees built) | %.3f | %s |\n"
+             "| scoring, warm probe (median of %d) | %.3f | metrics.json reproduced: %s |",
+             t_first, run_dir.name, repeat, t, same)
 
 
 if __name__ == "__main__":
