@@ -88,3 +88,42 @@ def test_a_goal_only_reachable_through_a_contact_is_unreachable() -> None:
     assert nav.contacts is not None and nav.contacts.n_contacts == 1
     assert event is not None and event.status == "unreachable"
     assert event.reason == "only through what the robot ran into"
+
+
+def _corridor_navigator(config: AgentConfig) -> tuple[Navigator, LocalGrid]:
+    """A robot in a dead-end corridor that has just stalled facing its only way on."""
+    nav = Navigator(config, 0.1)
+    grid = LocalGrid.centred(0.0, 0.0, 3.0, 0.05)
+    xs = np.arange(-3.0, 3.0, 0.05)
+    thick = np.arange(0.4, 1.2, 0.05)
+    walls = [(x, s * y) for x in xs for y in thick for s in (-1, 1)]
+    back = [(x, y) for x in np.arange(-1.2, -0.4, 0.05) for y in np.arange(-0.4, 0.41, 0.05)]
+    grid.update(np.array([(x, y) for x in xs[xs > -0.4] for y in np.arange(-0.35, 0.36, 0.05)]),
+                np.array(walls + back))
+    nav.set_goal(Goal(robot_id=0, goal_id=1, tick=0, x=1.5, y=0.0, frontier_class="unexplored",
+                      revenue=1.0), 0)
+    nav.step((0.0, 0.0, 0.0), grid, 1)
+    for tick in range(2, 14):
+        nav.observe_motion(tick, (0.0, 0.0, 0.0), 0.3, NOBODY)
+    return nav, grid
+
+
+def test_a_robot_its_marks_box_in_forgets_them_after_a_few_goals() -> None:
+    """The marks close the only way out (a robot stalled at the narrow gap it came in by):
+    the first goals end unreachable, the third in a row forgets the marks and drives; with
+    `contact_boxed_in_goals=0` every goal ends unreachable until the marks fade."""
+    for limit, drives_at in ((3, 3), (0, None)):
+        nav, grid = _corridor_navigator(AgentConfig(contact_layer=True,
+                                                    contact_boxed_in_goals=limit))
+        outcomes = []
+        for k in range(1, 5):
+            tick = 14 + k
+            if k > 1:
+                nav.set_goal(Goal(robot_id=0, goal_id=k, tick=tick, x=1.5 + 0.05 * k, y=0.0,
+                                  frontier_class="unexplored", revenue=1.0), tick)
+            cmd, event = nav.step((0.0, 0.0, 0.0), grid, tick)
+            outcomes.append("drive" if event is None and cmd.v_mps > 0 else event.status)
+        expected = ["unreachable"] * 4 if drives_at is None else \
+            ["unreachable"] * (drives_at - 1) + ["drive"] * (5 - drives_at)
+        assert outcomes == expected, (limit, outcomes)
+        assert nav.contacts is not None and nav.contacts.active(18) == (drives_at is None)

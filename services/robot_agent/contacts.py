@@ -78,6 +78,11 @@ class ContactLayer:
         self.ticks = np.concatenate([self.ticks[live], np.full(len(arc), tick)])
         self.n_contacts += 1
 
+    def clear(self) -> None:
+        """Forget every mark (the robot is boxed in by them: `Navigator._plan`)."""
+        self.points_xy = np.zeros((0, 2))
+        self.ticks = np.zeros(0, np.int64)
+
     def active(self, tick: int) -> bool:
         """Whether any mark is still in force at `tick`."""
         return bool(len(self.ticks)) and int(self.ticks.max()) > tick - self.params.ttl_ticks

@@ -23,8 +23,6 @@ from services.robot_agent.local_grid import OCCUPIED, UNKNOWN, LocalGrid
 from services.robot_agent.path_smoothing import smooth_path
 from services.robot_agent.validator import PassLog, expected_times, window_exceeded
 
-WINDOW_MARGIN_M = 1.0
-
 
 @dataclass(frozen=True)
 class Command:
@@ -161,6 +159,7 @@ class Navigator:
         self.had_goal = False
         self.contacts = (ContactLayer(ContactParams(), config.robot_radius_m)
                          if config.contact_layer else None)
+        self.boxed_in = 0  # goals in a row that only the contact marks kept from a path
 
     def observe_motion(self, tick: int, pose: tuple[float, float, float], v_cmd_mps: float,
                        teammates_xy: np.ndarray) -> None:
@@ -200,7 +199,7 @@ class Navigator:
         spec, cfg = grid.spec, self.config
         xy, goal_xy = np.array(pose[:2]), np.array([self.goal.x, self.goal.y])
         extra = spec.cell_of(np.array([xy, goal_xy]))
-        rows, cols = grid.window(int(WINDOW_MARGIN_M / spec.resolution_m), extra)
+        rows, cols = grid.window(int(round(cfg.plan_beyond_known_m / spec.resolution_m)), extra)
         sub = GridSpec(
             spec.origin_x + cols.start * spec.resolution_m,
             spec.origin_y + rows.start * spec.resolution_m,
@@ -216,8 +215,9 @@ class Navigator:
             around = plan_path(traversable_of(self.contacts.mark(cells, sub, tick), radius,
                                               cfg.plan_through_unknown),
                                sub, xy, goal_xy, cfg.goal_snap_m, cfg.smooth_paths)
-            result = around if around.path_xy is not None else PlanResult(
-                None, "only through what the robot ran into")
+            result = around if around.path_xy is not None else self._boxed_in(result)
+        if result.path_xy is not None:
+            self.boxed_in = 0
         self.plan_tick = tick
         if result.path_xy is not None:
             # The path starts at the robot's cell: t_e from the robot's pose, then the path.
@@ -225,6 +225,19 @@ class Navigator:
             self.path_xy, self.index = path, 0
             self.t_e = expected_times(path, pose[2], cfg.max_v_mps, cfg.max_omega_radps)
         return result
+
+    def _boxed_in(self, without_marks: PlanResult) -> PlanResult:
+        """A goal only the contact marks cut off: unreachable, unless as many goals in a row
+        were (`contact_boxed_in_goals`): then the marks close every way out of where the
+        robot stands, and it forgets them and takes the path (ROS's clear-costmap recovery;
+        a robot stalled in a narrow gap otherwise stood there, every goal unreachable)."""
+        assert self.contacts is not None
+        self.boxed_in += 1
+        limit = self.config.contact_boxed_in_goals
+        if limit and self.boxed_in >= limit:
+            self.contacts.clear()
+            return without_marks
+        return PlanResult(None, "only through what the robot ran into")
 
     def avoid(self, xy: np.ndarray, tick: int) -> None:
         """Plan around a teammate at `xy` from now until the next periodic replan."""
