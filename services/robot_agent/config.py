@@ -288,7 +288,7 @@ class AgentConfig(BaseModel):
     plan_through_unknown: bool = True
     # 0 ends the 17-39 s drives around the outside of the house to a goal cut off inside,
     # yet over ten seeds × three worlds 9 missions of 30 ended under 98 % 3D coverage
-    # against 3 (docs/agent.md, "A path around the outside of the world"): 1 m stays
+    # against 3 (docs/agent.md, "A path around the outside of the house"): 1 m stays
     plan_beyond_known_m: float = Field(
         default=1.0, ge=0, description="how far beyond the box of every known cell (and the "
         "robot and its goal) a path may run through unknown space, m (0: a goal cut off "
