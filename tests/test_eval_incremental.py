@@ -168,3 +168,25 @@ def test_a_sample_scores_only_new_points(monkeypatch: pytest.MonkeyPatch) -> Non
                           return_index=True)[1]]
     scorer(more, [more])
     assert sum(looked_up) <= 2 * (len(more) - len(pts))
+
+
+def test_the_same_final_maps_are_scored_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A mission's end scores its final maps as the series' last row (float32 cloud) and as
+    metrics.json (float64 read back from the PLY files): the second call gives the first's
+    figures without scoring; other maps are scored again."""
+    import services.evaluator.scoring as scoring
+
+    probe = box_probe()
+    rng = np.random.default_rng(11)
+    pts = lattice(rng, 300).astype(np.float32)
+    robots = [pts[:150], pts[150:]]
+    calls = []
+    real = scoring._map_quality
+    monkeypatch.setattr(scoring, "_map_quality", lambda *a: calls.append(1) or real(*a))
+    first = map_quality(probe, pts, robots)
+    again = map_quality(probe, pts.astype(np.float64), [r.astype(np.float64) for r in robots])
+    assert again == first and len(calls) == 1
+    assert map_quality(probe, pts, None)["overlap_3d_pct"] is None and len(calls) == 2
+    moved = pts.copy()
+    moved[0, 0] += 0.5
+    assert map_quality(probe, moved, robots) != first and len(calls) == 3
