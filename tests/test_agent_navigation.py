@@ -7,9 +7,16 @@ import math
 import numpy as np
 
 from schemas.messages import Goal
+from services.common.grid import GridSpec
 from services.robot_agent.config import AgentConfig
 from services.robot_agent.local_grid import LocalGrid
-from services.robot_agent.navigation import Command, Navigator, pure_pursuit, segment_times
+from services.robot_agent.navigation import (
+    Command,
+    Navigator,
+    plan_path,
+    pure_pursuit,
+    segment_times,
+)
 
 CFG = AgentConfig()
 DT = 0.1
@@ -192,3 +199,18 @@ def test_avoid_plans_around_a_teammate_until_the_next_replan() -> None:
     nav.step((-1.5, -1.5, math.pi / 2), grid, 2 + cfg.replan_every_ticks)  # expired
     assert nav.avoid_xy is None
     assert np.abs(nav.path_xy[:, 0] + 1.5).max() < 0.06
+
+
+def test_a_start_the_inflated_obstacles_close_in_plans_out_through_the_pinch() -> None:
+    spec = GridSpec(0.0, 0.0, 0.05, 60, 60)
+    trav = np.zeros((60, 60), bool)
+    trav[:, 20:] = True  # the mainland, 0.3 m from the island
+    trav[30, 10:15] = True  # where the robot stands: five cells closed in by inflation
+    start_xy, goal_xy = spec.centre_of(np.array([[30, 12], [30, 50]]))
+    assert plan_path(trav, spec, start_xy, goal_xy, 0.3).path_xy is None
+    path = plan_path(trav, spec, start_xy, goal_xy, 0.3, island=(100, 1.0)).path_xy
+    assert path is not None
+    np.testing.assert_allclose(path[0], spec.centre_of(np.array([[30, 20]]))[0])
+    np.testing.assert_allclose(path[-1], goal_xy)
+    too_far = plan_path(trav, spec, start_xy, goal_xy, 0.3, island=(100, 0.2))
+    assert too_far.path_xy is None

@@ -129,3 +129,20 @@ def test_lazy_fields_reach_where_finite() -> None:
     np.testing.assert_array_equal(fields.reaches(0, cells),
                                   np.isfinite(fields[0][cells[:, 0], cells[:, 1]]))
     assert not fields.reaches(1, cells).any() and np.isinf(fields[1]).all()
+
+
+def test_a_robot_on_a_small_island_plans_from_the_mainland_next_to_it() -> None:
+    from services.edge_server.robot_fields import RobotFields
+
+    trav = np.zeros((40, 40), bool)
+    trav[:, 10:] = True  # the mainland
+    trav[20, 5] = True  # the robot's one-cell island: inflated obstacles close it in
+    start = {0: np.array([20, 5])}
+    far_side = np.array([[0, 39]])
+    kept = RobotFields(trav, start, 8.0)
+    assert kept.starts[0] == (20, 5) and not kept.reaches(0, far_side).any()
+    moved = RobotFields(trav, start, 8.0, island_cells=100)
+    assert moved.starts[0] == (20, 10) and moved.reaches(0, far_side).all()
+    assert np.isfinite(moved[0][0, 39])
+    beyond = RobotFields(trav, start, 3.0, island_cells=100)  # the mainland out of reach
+    assert beyond.starts[0] == (20, 5) and not beyond.reaches(0, far_side).any()

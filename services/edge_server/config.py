@@ -33,6 +33,11 @@ class EdgeConfig(BaseModel):
         default=1.0, ge=0, description="a robot off the traversable grid plans from the nearest "
         "traversable cell within this distance (the floor under a robot is never seen)"
     )
+    start_island_m2: float = Field(
+        default=1.0, ge=0, description="a robot on a traversable island smaller than this plans "
+        "from the nearest larger component within start_snap_m: inflated obstacles pinch the "
+        "way it came in (house seed 1: a robot on a one-cell island got no goal for 82 s); 0: off"
+    )
     # bi-variate spatial frontiers (Alg. 1; choices and evidence: docs/edge.md)
     frontier_voxel_m: float = Field(default=0.05, gt=0, description="ϱ: downsample voxel")
     search_radius_m: float = Field(default=0.15, gt=0, description="r_s")

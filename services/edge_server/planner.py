@@ -303,7 +303,8 @@ class EdgePlanner:
         radius_cells = math.ceil(self.config.robot_radius_m / spec.resolution_m - 1e-9)
         traversable = snap.free & ~self.inflation(snap.occupied, radius_cells)
         starts = dict(zip(robots, spec.cell_of(robot_xy), strict=True))
-        fields = RobotFields(traversable, starts, self.config.start_snap_m / spec.resolution_m)
+        fields = RobotFields(traversable, starts, self.config.start_snap_m / spec.resolution_m,
+                             int(self.config.start_island_m2 / spec.resolution_m**2))
         reachable = fields.reachable
         goal_edt = goal_transform(self.book.goal_cells(reachable, spec))
         fs = self._frontiers(tick, snap, traversable, reachable, fields, robot_xy, goal_edt)

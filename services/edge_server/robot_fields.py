@@ -37,18 +37,27 @@ class RobotFields:
     """Snapped starts, components and lazily computed distance fields (cells) per robot."""
 
     def __init__(self, traversable: np.ndarray, starts_rc: dict[int, np.ndarray],
-                 snap_cells: float) -> None:
+                 snap_cells: float, island_cells: int = 0) -> None:
         """A start off the traversable grid snaps to the nearest traversable cell within
         `snap_cells` (the floor under a robot is never seen); farther, the robot reaches
-        nothing."""
+        nothing. A start on an island of fewer than `island_cells` cells snaps, within the
+        same distance, to a larger component: the robot drove in, so it can drive out, and
+        the map's inflated obstacles merely pinch the way (0: islands are kept)."""
         self.traversable = traversable
         self.shape = traversable.shape
+        self.labels, _ = ndimage.label(traversable)
+        sizes = np.bincount(self.labels.ravel())
+        sizes[0] = 0
+        mainland: np.ndarray | None = None
         self.starts: dict[int, tuple[int, int]] = {}
         for robot, (r, c) in starts_rc.items():
             snapped = snap_start(traversable, (int(r), int(c)), snap_cells)
+            if snapped is not None and sizes[self.labels[snapped]] < island_cells:
+                if mainland is None:
+                    mainland = sizes[self.labels] >= island_cells
+                snapped = snap_start(mainland, (int(r), int(c)), snap_cells) or snapped
             if snapped is not None:
                 self.starts[robot] = snapped
-        self.labels, _ = ndimage.label(traversable)
         self.component = {robot: int(self.labels[rc]) for robot, rc in self.starts.items()}
         self.reachable = np.isin(self.labels, sorted(set(self.component.values())))
         self.robots = sorted(starts_rc)

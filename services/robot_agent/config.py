@@ -295,6 +295,11 @@ class AgentConfig(BaseModel):
         "inside is not reached by a path around the outside of the world's walls)")
     goal_tolerance_m: float = Field(default=0.35, gt=0)
     goal_snap_m: float = Field(default=0.6, ge=0, description="snap a blocked goal this far")
+    start_island_m2: float = Field(
+        default=1.0, ge=0, description="a robot on a traversable island smaller than this plans "
+        "from the nearest larger component within start_island_snap_m (as the edge assigns "
+        "goals: edge.start_island_m2); 0: off")
+    start_island_snap_m: float = Field(default=1.0, ge=0)
     replan_every_ticks: int = Field(default=20, ge=1)
     lookahead_m: float = Field(default=0.4, gt=0)
     smooth_paths: bool = Field(

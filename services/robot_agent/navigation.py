@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
 from schemas.messages import Goal, GoalState
 from services.common.geometry import wrap_angle
@@ -65,10 +66,11 @@ def snap_cell(mask: np.ndarray, rc: tuple[int, int], radius_cells: float) -> tup
 
 def plan_path(
     traversable: np.ndarray, spec: GridSpec, start_xy: np.ndarray, goal_xy: np.ndarray,
-    snap_m: float, smooth: bool = False,
+    snap_m: float, smooth: bool = False, island: tuple[int, float] = (0, 0.0),
 ) -> PlanResult:
     """A* from start to goal; a blocked start or goal moves to the nearest usable cell;
-    `smooth`: the path shortened along lines of sight (path_smoothing.py)."""
+    `smooth`: the path shortened along lines of sight (path_smoothing.py); `island`: (cells,
+    m) a start on a component of fewer cells moves to a larger one within that distance."""
     rc = spec.cell_of(np.array([start_xy, goal_xy]))
     if not spec.contains(rc).all():
         return PlanResult(None, "goal outside the local grid")
@@ -79,6 +81,9 @@ def plan_path(
         if start is None:
             return PlanResult(None, "robot is boxed in by obstacles")
     reach = reachable(traversable, start)
+    if island[0] and np.count_nonzero(reach) < island[0]:
+        start, reach = _off_island(traversable, start, reach, island[0],
+                                   island[1] / spec.resolution_m)
     if not reach[goal]:
         goal = snap_cell(reach, goal, snap_cells)
         if goal is None:
@@ -87,6 +92,20 @@ def plan_path(
     if path_rc is None:  # cannot happen after the reachability check; be safe
         return PlanResult(None, "A* found no path")
     return PlanResult(spec.centre_of(smooth_path(traversable, path_rc) if smooth else path_rc))
+
+
+def _off_island(traversable: np.ndarray, start: tuple[int, int], reach: np.ndarray,
+                min_cells: int, snap_cells: float) -> tuple[tuple[int, int], np.ndarray]:
+    """The nearest cell of a component of at least `min_cells` within `snap_cells`, and its
+    component; (start, reach) when there is none. The robot drove onto its island, so the
+    inflated obstacles that close it in only pinch the way out."""
+    labels, _ = ndimage.label(traversable)
+    sizes = np.bincount(labels.ravel())
+    sizes[0] = 0
+    near = snap_cell(sizes[labels] >= min_cells, start, snap_cells)
+    if near is None:
+        return start, reach
+    return near, labels == labels[near]
 
 
 def path_blocked(grid: LocalGrid, path_xy: np.ndarray, radius_cells: int) -> bool:
@@ -208,7 +227,8 @@ class Navigator:
         cells = self._blocked_by_teammate(grid.cells(rows, cols), sub, tick)
         radius = inflation_cells(cfg, spec.resolution_m)
         trav = traversable_of(cells, radius, cfg.plan_through_unknown)
-        result = plan_path(trav, sub, xy, goal_xy, cfg.goal_snap_m, cfg.smooth_paths)
+        island = (int(cfg.start_island_m2 / spec.resolution_m**2), cfg.start_island_snap_m)
+        result = plan_path(trav, sub, xy, goal_xy, cfg.goal_snap_m, cfg.smooth_paths, island)
         if self.contacts is not None and result.path_xy is not None \
                 and self.contacts.active(tick):
             # around what the robot ran into; a goal only reachable through it is not
