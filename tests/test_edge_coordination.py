@@ -137,3 +137,18 @@ def test_space_with_grid_gain_goes_where_the_unknown_floor_is() -> None:
     assert int(np.argmax(scorer.score(path, fs, robot)[0])) == 1
     held = RobotStates(np.zeros((1, 2)), np.array([math.pi / 2]), np.array([[-2.5, 0.0]]))
     assert int(np.argmax(scorer.score(path, fs, held)[0])) == 0
+
+
+def test_a_large_region_outbids_a_speck_nearer_only_when_sizes_count() -> None:
+    """AWS house seed 1: a robot left a 1211-voxel region 6 m away for a speck 2 m away,
+    which the mean entropy alone (the paper's I_g) scores as high; a teammate drove back
+    across the house for it 100 s later."""
+    robot = RobotStates(np.zeros((1, 2)), np.zeros(1), np.zeros((0, 2)))
+    fs = replace(regions([(2.0, 0.0), (6.0, 0.0)], [0.3, 0.3]), sizes=np.array([8, 1211]))
+    path = np.array([[2.0, 6.0]])
+    plain = make_scorer("space", EdgeConfig()).score(path, fs, robot)
+    assert int(np.argmax(plain[0])) == 0
+    sized = make_scorer("space", EdgeConfig(space_size_exponent=0.5)).score(path, fs, robot)
+    assert int(np.argmax(sized[0])) == 1
+    # the weight is relative to the smallest region the detector keeps: a minimal one × 1
+    np.testing.assert_allclose(sized[0, 0], plain[0, 0])

@@ -94,6 +94,10 @@ class EdgeConfig(BaseModel):
         default=0.0, ge=0, description="regions this close to a teammate's goal are discounted "
         "(0: space_view_radius_m)")
     space_joint: bool = Field(default=True, description="assignment problem instead of greedy")
+    space_size_exponent: float = Field(
+        default=0.0, ge=0, le=1, description="`space`: a region's information also grows as "
+        "(its voxels / unexplored_min_voxels)^this, so a large region outbids a speck at the "
+        "same distance; 0: I_t·I_g alone, whatever the size")
     space_grid_gain_per_m: float = Field(
         default=0.0, ge=0, description="`space`: a goal is also worth this per metre of 2D "
         "grid frontier within space_grid_view_m of it (the unknown floor it looks into), so "

@@ -93,11 +93,13 @@ def coordinated_revenue(
     path_m: np.ndarray, frontiers: FrontierSet, robots: RobotStates, *, v_mps: float,
     omega_radps: float, view_radius_m: float, teammate_discount: float, min_time_s: float,
     grid_gain_per_m: float = 0.0, grid_view_m: float = 0.0, teammate_radius_m: float | None = None,
+    size_exponent: float = 0.0, size_ref: float = 1.0,
 ) -> np.ndarray:
     """(R, F) view information (teammates' discounted) per second of travel; −inf unreachable.
     With `grid_gain_per_m`, a goal is also worth that much per metre of 2D grid frontier
     near it (`frontiers.grid_frontier_m`), discounted where a teammate's goal is as near.
-    `teammate_radius_m` (default `view_radius_m`): how near a teammate's goal discounts."""
+    `teammate_radius_m` (default `view_radius_m`): how near a teammate's goal discounts.
+    `size_exponent` > 0: each region's information × (its size / `size_ref`)^that."""
     if teammate_radius_m is None:
         teammate_radius_m = view_radius_m
     n = len(frontiers)
@@ -105,6 +107,8 @@ def coordinated_revenue(
     imp = frontiers.importance if frontiers.importance is not None else np.ones(n)
     info = imp * gain * teammate_factor(frontiers.centroid_xy, robots.held_goals_xy,
                                         teammate_radius_m, teammate_discount)
+    if size_exponent > 0:
+        info = info * (np.maximum(frontiers.sizes, 1) / size_ref) ** size_exponent
     view = view_information(frontiers.goal_xy, frontiers.centroid_xy, info, view_radius_m)
     if grid_gain_per_m > 0 and frontiers.grid_frontier_m is not None:
         view = view + grid_gain_per_m * frontiers.grid_frontier_m * teammate_factor(
