@@ -140,9 +140,9 @@ def test_space_with_grid_gain_goes_where_the_unknown_floor_is() -> None:
 
 
 def test_a_large_region_outbids_a_speck_nearer_only_when_sizes_count() -> None:
-    """AWS house seed 1: a robot left a 1211-voxel region 6 m away for a speck 2 m away,
-    which the mean entropy alone (the paper's I_g) scores as high; a teammate drove back
-    across the house for it 100 s later."""
+    """AWS house seed 1: a robot 6 m from a 1211-voxel region took a 394-voxel one 2 m away;
+    the mean entropy alone (the paper's I_g) is blind to size, and teammates drove back
+    across the house for the large one 100 s later."""
     robot = RobotStates(np.zeros((1, 2)), np.zeros(1), np.zeros((0, 2)))
     fs = replace(regions([(2.0, 0.0), (6.0, 0.0)], [0.3, 0.3]), sizes=np.array([8, 1211]))
     path = np.array([[2.0, 6.0]])
