@@ -55,7 +55,7 @@ def main() -> None:
     rows: list[tuple[str, float, str]] = []
     t, grid = timed(lambda: reachable_free_grid(model, SPAWN), args.repeat)
     rows.append(("free grid (0.05 m)", t, f"{grid.free_area_m2:.1f} m² reachable"))
-    t, (points, tri) = timed(lambda: surface_samples(model), args.repeat)
+    t, (points, tri, _) = timed(lambda: surface_samples(model), args.repeat)
     rows.append(("surface samples (1000/m²)", t, f"{len(points)} points"))
     t, seen = timed(lambda: observable_surface(model, points, grid, triangle_ids=tri), 1)
     rows.append(("observable filter", t, f"{seen.sum()} observable ({100 * seen.mean():.1f} %)"))
@@ -74,7 +74,7 @@ def main() -> None:
         t, value = timed(fn, args.repeat)
         rows.append((name, t, f"{value:.3f}"))
     # one live time-series sample: coverage, overlap, RMSE, BV with the truth's cached KD-tree
-    probe = Probe(GroundTruth(grid, points, seen), EvalConfig())
+    probe = Probe(GroundTruth(grid, points, seen, seen), EvalConfig())
     probe.surface_tree  # noqa: B018 - built once per run, outside the per-sample cost
     t, quality = timed(lambda: map_quality(probe, map_pts, np.array_split(map_pts, 3)),
                        args.repeat)

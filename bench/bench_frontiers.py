@@ -38,7 +38,7 @@ log = logging.getLogger("bench_frontiers")
 
 def house_map(density: float, z_max: float, voxel_m: float) -> np.ndarray:
     model = load_world("house").compile()
-    points, _ = surface_samples(model, density_per_m2=density)
+    points, _, _ = surface_samples(model, density_per_m2=density)
     points = points[points[:, 2] <= z_max]
     idx = np.unique(np.floor(points / voxel_m).astype(np.int64), axis=0)
     return (idx + 0.5) * voxel_m

@@ -26,11 +26,7 @@ from scipy.spatial import cKDTree  # noqa: E402
 from services.evaluator import run_files as rf  # noqa: E402
 from services.evaluator.evaluate import RunConfig, load_tracks, probe_for  # noqa: E402
 from services.evaluator.observable import _visible_along_rays, viewpoints  # noqa: E402
-from services.evaluator.surfaces import (  # noqa: E402
-    sensed_groups,
-    surface_samples,
-    world_triangles,
-)
+from services.evaluator.surfaces import sensed_groups, surface_samples  # noqa: E402
 from services.simulator.worlds import load_world  # noqa: E402
 
 HEIGHT_BINS_M = (-0.1, 0.3, 0.6, 1.0, 1.5, 2.0, 2.5, 10.0)
@@ -111,17 +107,14 @@ def main() -> None:
     for lo, hi, n in zip(HEIGHT_BINS_M[:-1], HEIGHT_BINS_M[1:], counts, strict=True):
         print(f"  height {lo:5.1f} to {hi:4.1f} m: {n}")
     model = load_world(config.sim.world).compile()
-    samples, triangle = surface_samples(model, ev.density_per_m2, seed=ev.seed)
+    samples, _, normal = surface_samples(model, ev.density_per_m2, seed=ev.seed)
     if samples.shape != gt.surface_points_world.shape or not np.allclose(
             samples, gt.surface_points_world):
         sys.exit("the cached truth's samples differ from the world's: rebuild the cache")
-    tris = world_triangles(model)
-    normal = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
     rng = np.random.default_rng(0)
     pick = rng.choice(len(missing), min(args.sample, len(missing)), replace=False)
     views = viewpoints(gt.free_grid, ev.camera_height_m, ev.viewpoint_spacing_m)
-    at_all, within = seen_from_some_view(model, points[pick], normal[triangle[missing[pick]]],
+    at_all, within = seen_from_some_view(model, points[pick], normal[missing[pick]],
                                          views, ev.range_m, ev.max_elevation_deg,
                                          args.max_incidence)
     print(f"  of {len(pick)} sampled: seen from some reachable viewpoint {at_all.mean():.3f}, "

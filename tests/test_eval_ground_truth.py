@@ -14,8 +14,14 @@ from services.evaluator.config import EvalConfig
 from services.evaluator.free_space import reachable_free_grid
 from services.evaluator.gazebo_map import compare_with_ros_map, load_ros_map
 from services.evaluator.ground_truth import _load, _save, ground_truth
-from services.evaluator.observable import observable_surface
-from services.evaluator.surfaces import surface_samples
+from services.evaluator.observable import (
+    Incidence,
+    _allowed,
+    _visible_along_rays,
+    observable_surface,
+    viewpoints,
+)
+from services.evaluator.surfaces import sensed_groups, surface_samples
 
 AWS = Path(__file__).resolve().parents[1].parent / "shared" / "worlds" / "aws_small_house"
 
@@ -45,7 +51,7 @@ def test_surface_density_on_box() -> None:
     model = mujoco.MjModel.from_xml_string(
         '<mujoco><worldbody><geom type="box" size="1 2 0.5" pos="1 2 3"/></worldbody></mujoco>'
     )
-    points, tri = surface_samples(model, density_per_m2=1000, seed=3)
+    points, tri, _ = surface_samples(model, density_per_m2=1000, seed=3)
     area = 2 * (2 * 4 + 2 * 1 + 4 * 1)  # 28 m²
     assert len(points) == pytest.approx(1000 * area, rel=0.001)
     local = np.abs(points - [1, 2, 3])
@@ -56,7 +62,7 @@ def test_surface_density_on_box() -> None:
     top_bottom = np.isclose(local[:, 2], 0.5).mean()
     assert top_bottom == pytest.approx(16 / 28, abs=0.01)
     assert len(tri) == len(points)
-    again, _ = surface_samples(model, density_per_m2=1000, seed=3)
+    again, _, _ = surface_samples(model, density_per_m2=1000, seed=3)
     np.testing.assert_array_equal(points, again)
 
 
@@ -77,7 +83,7 @@ def test_reachable_grid_of_room_excludes_closet(room: mujoco.MjModel) -> None:
 
 def test_observable_surface_of_room(room: mujoco.MjModel) -> None:
     grid = reachable_free_grid(room, SPAWN)
-    points, tri = surface_samples(room, density_per_m2=150, seed=0)
+    points, tri, _ = surface_samples(room, density_per_m2=150, seed=0)
     seen = observable_surface(room, points, grid, triangle_ids=tri, seed=0)
     x, y, z = points.T
     in_closet = (x > 5.06) & (y > 3.06) & (z < 1.0)
@@ -88,6 +94,57 @@ def test_observable_surface_of_room(room: mujoco.MjModel) -> None:
     assert west.sum() > 100 and seen[west].mean() > 0.97
     floor_mid = (np.abs(z) < 1e-9) & (x > 1) & (x < 4) & (y > 1) & (y < 3)
     assert seen[floor_mid].mean() > 0.97
+
+
+# The room again with a 1.2 × 1.2 × 0.3 m box at (3, 2): the middle of its top, 5 cm under
+# the camera, is in sight from around it, but never more than 6° above the grazing line.
+LEDGE_XML = ROOM_XML.replace(
+    '<body name="robot"', '<geom type="box" size="0.6 0.6 0.15" pos="3 2 0.15"/><body name="robot"')
+
+
+def _brute_force(model: mujoco.MjModel, points: np.ndarray, normals: np.ndarray,
+                 views: np.ndarray, max_incidence_deg: float | None) -> np.ndarray:
+    """Every viewpoint of the lattice, each allowed one ray-tested: what the search estimates."""
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    geomgroup = np.array([g in sensed_groups(model) for g in range(6)], np.uint8)
+    seen = np.zeros(len(points), bool)
+    for i, p in enumerate(points):
+        normal = None if max_incidence_deg is None else np.broadcast_to(normals[i], views.shape)
+        ok = _allowed(np.broadcast_to(p, views.shape), views, 5.0, 34.08, normal,
+                      max_incidence_deg or 90.0)
+        for v in views[ok]:
+            if _visible_along_rays(model, data, v, p[None], geomgroup, 5.1)[0]:
+                seen[i] = True
+                break
+    return seen
+
+
+def test_the_incidence_limit_drops_what_is_seen_only_grazing() -> None:
+    """With the camera's incidence limit the search keeps what some viewpoint sees within it:
+    never more than every viewpoint tried one by one finds, and nearly all of that; the
+    ledge's top at camera height drops out, the walls and the floor stay."""
+    model = mujoco.MjModel.from_xml_string(LEDGE_XML)
+    grid = reachable_free_grid(model, SPAWN)
+    points, tri, normals = surface_samples(model, density_per_m2=150, seed=0)
+    in_sight = observable_surface(model, points, grid, triangle_ids=tri, seed=0)
+    # every sample tested (the truth shares verdicts on a triangle, approximate at edges)
+    within = observable_surface(model, points, grid, triangle_ids=tri, seed=0, test_stride=1,
+                                incidence=Incidence(normals, 80.0))
+    x, y, z = points.T
+    ledge_top = np.isclose(z, 0.3) & (np.abs(x - 3) < 0.3) & (np.abs(y - 2) < 0.3)
+    assert ledge_top.sum() > 30 and in_sight[ledge_top].all() and not within[ledge_top].any()
+    west = np.isclose(x, 0.0) & (y > 0.5) & (y < 2.5) & (z > 0.1) & (z < 0.9)
+    assert within[west].mean() > 0.97
+    floor_mid = (np.abs(z) < 1e-9) & (x > 1) & (x < 4) & (y > 1) & (y < 3) & ~(
+        (np.abs(x - 3) < 0.61) & (np.abs(y - 2) < 0.61))
+    assert within[floor_mid].mean() > 0.97
+    pick = np.random.default_rng(1).choice(len(points), 300, replace=False)
+    views = viewpoints(grid, 0.35, 0.25)
+    truth = _brute_force(model, points[pick], normals[pick], views, 80.0)
+    assert not (within[pick] & ~truth).any()
+    assert within[pick][truth].mean() > 0.97
+    assert truth.sum() < _brute_force(model, points[pick], normals[pick], views, None).sum()
 
 
 def test_ground_truth_cache_is_identical(room: mujoco.MjModel, tmp_path: Path) -> None:

@@ -28,7 +28,8 @@ def box_probe(seed: int = 0, ev: EvalConfig | None = None) -> Probe:
     pts = np.concatenate([floor, wall])
     spec = GridSpec(0.0, 0.0, VOXEL_M, 20, 20)
     ones = np.ones(spec.shape, bool)
-    return Probe(GroundTruth(FreeGrid(spec, ~ones, ones, ones), pts, rng.random(len(pts)) < 0.5),
+    seen = rng.random(len(pts)) < 0.5
+    return Probe(GroundTruth(FreeGrid(spec, ~ones, ones, ones), pts, seen, seen),
                  ev or EvalConfig())
 
 

@@ -38,8 +38,8 @@ def probe() -> Probe:
     spec = GridSpec(0.0, 0.0, VOXEL_M, 40, 40)
     ones = np.ones(spec.shape, bool)
     gt = plane_truth()
-    return Probe(GroundTruth(FreeGrid(spec, ~ones, ones, ones), gt, np.ones(len(gt), bool)),
-                 EvalConfig())
+    seen = np.ones(len(gt), bool)
+    return Probe(GroundTruth(FreeGrid(spec, ~ones, ones, ones), gt, seen, seen), EvalConfig())
 
 
 def voxel_centres(x_lo: float, x_hi: float) -> np.ndarray:

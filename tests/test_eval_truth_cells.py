@@ -97,7 +97,7 @@ def test_probe_coverage_2d_equals_the_metric_as_the_grid_changes() -> None:
     truth_spec = GridSpec(0.0, 0.0, 0.05, 40, 50)
     free = rng.random(truth_spec.shape) < 0.6
     probe = Probe(GroundTruth(FreeGrid(truth_spec, ~free, free, free), np.zeros((1, 3)),
-                              np.ones(1, bool)), EvalConfig())
+                              np.ones(1, bool), np.ones(1, bool)), EvalConfig())
     seen = set()
     for origin, shape in [((-0.3, -0.2), (30, 30)), ((-0.3, -0.2), (30, 30)),
                           ((-0.3, -0.2), (60, 70)), ((0.51, 0.27), (25, 40))]:

@@ -26,6 +26,11 @@ class EvalConfig(BaseModel):
         default=math.degrees(math.atan(math.tan(math.radians(84.1 / 2)) * 3 / 4)),
         description="half the vertical FoV of a level 4:3 camera; None = any direction",
     )
+    max_incidence_deg: float | None = Field(
+        default=None, gt=0, le=90, description="the camera returns nothing where a ray meets "
+        "a surface further than this off its normal (the simulator's depth_max_incidence_deg):"
+        " the observable truth keeps only what some viewpoint sees within it; None = no limit"
+    )
     viewpoint_spacing_m: float = Field(default=0.25, gt=0, description="lattice of camera spots")
     visibility_rounds: int = Field(default=24, ge=1, description="random viewpoints tried/sample")
     coverage_radius_m: float = Field(default=0.10, gt=0)

@@ -19,12 +19,12 @@ import numpy as np
 from services.common.grid import GridSpec
 from services.evaluator.config import EvalConfig
 from services.evaluator.free_space import FreeGrid, reachable_free_grid
-from services.evaluator.observable import observable_surface
+from services.evaluator.observable import Incidence, observable_surface
 from services.evaluator.surfaces import surface_samples
 
 log = logging.getLogger(__name__)
 
-_CACHE_VERSION = "1"
+_CACHE_VERSION = "2"
 _MODEL_FIELDS = (
     "geom_type", "geom_size", "geom_group", "geom_contype", "geom_conaffinity", "geom_pos",
     "geom_quat", "geom_bodyid", "geom_dataid", "body_pos", "body_quat", "body_parentid",
@@ -34,11 +34,13 @@ _MODEL_FIELDS = (
 
 @dataclass(frozen=True)
 class GroundTruth:
-    """2D truth (free grid) and 3D truth (all surface samples, and which are observable)."""
+    """2D truth (free grid) and 3D truth (all surface samples, which are observable, and
+    which are in sight at all, whatever the camera's incidence limit)."""
 
     free_grid: FreeGrid
     surface_points_world: np.ndarray  # (N, 3) every sampled static surface point
-    observable: np.ndarray  # (N,) bool
+    observable: np.ndarray  # (N,) bool: in sight, and within the incidence limit
+    in_sight: np.ndarray  # (N,) bool: some reachable viewpoint sees it (observable ⊆ in_sight)
 
     @property
     def observable_points_world(self) -> np.ndarray:
@@ -68,13 +70,21 @@ def compute_ground_truth(
     free_grid = reachable_free_grid(
         model, spawn_xy, config.resolution_m, config.robot_radius_m, config.band_z_m
     )
-    points, tri_ids = surface_samples(model, config.density_per_m2, seed=config.seed)
-    observable = observable_surface(
-        model, points, free_grid, config.camera_height_m, config.range_m,
-        config.max_elevation_deg, config.viewpoint_spacing_m, config.visibility_rounds,
-        seed=config.seed, triangle_ids=tri_ids,
-    )
-    return GroundTruth(free_grid, points, observable)
+    points, tri_ids, normals = surface_samples(model, config.density_per_m2, seed=config.seed)
+    def search(index: np.ndarray, incidence: Incidence | None) -> np.ndarray:
+        return observable_surface(
+            model, points[index], free_grid, config.camera_height_m, config.range_m,
+            config.max_elevation_deg, config.viewpoint_spacing_m, config.visibility_rounds,
+            seed=config.seed, triangle_ids=tri_ids[index], incidence=incidence,
+        )
+
+    in_sight = search(np.arange(len(points)), None)
+    observable = in_sight.copy()
+    if config.max_incidence_deg is not None and config.max_incidence_deg < 90:
+        sighted = np.flatnonzero(in_sight)
+        observable[sighted] = search(sighted, Incidence(normals[sighted],
+                                                        config.max_incidence_deg))
+    return GroundTruth(free_grid, points, observable, in_sight)
 
 
 def _save(path: Path, gt: GroundTruth) -> None:
@@ -87,6 +97,7 @@ def _save(path: Path, gt: GroundTruth) -> None:
         tmp, spec=np.array([spec.origin_x, spec.origin_y, spec.resolution_m]),
         occupied=gt.free_grid.occupied, centres=gt.free_grid.centres, free=gt.free_grid.free,
         points=gt.surface_points_world.astype(np.float32), observable=gt.observable,
+        in_sight=gt.in_sight,
     )
     tmp.replace(path)  # atomic: a concurrent reader never sees half a file
 
@@ -97,7 +108,8 @@ def _load(path: Path) -> GroundTruth:
         free = z["free"]
         spec = GridSpec(float(ox), float(oy), float(res), free.shape[0], free.shape[1])
         grid = FreeGrid(spec, z["occupied"], z["centres"], free)
-        return GroundTruth(grid, z["points"].astype(np.float64), z["observable"])
+        return GroundTruth(grid, z["points"].astype(np.float64), z["observable"],
+                           z["in_sight"])
 
 
 def ground_truth(

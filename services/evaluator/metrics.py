@@ -17,7 +17,8 @@ from services.common.arrays import in_sorted, unique_sorted
 from services.common.grid import GridSpec
 
 METRICS_KEYS = (
-    "coverage_3d_pct", "coverage_2d_pct", "overlap_3d_pct", "overlap_2d_pct", "rmse_3d_cm",
+    "coverage_3d_pct", "coverage_3d_in_sight_pct", "coverage_2d_pct", "overlap_3d_pct",
+    "overlap_2d_pct", "rmse_3d_cm",
     "bounding_volume_pct", "mapping_time_s", "t90_s", "t99_s", "total_distance_m",
     "bytes_per_robot", "ate_rmse_cm", "ate_rmse_cm_per_robot", "sim_time_s", "wall_time_s",
     "robots", "world", "planner", "drf", "seed", "completed",

@@ -190,6 +190,19 @@ def _map_quality(
     }
 
 
+def coverage_in_sight(probe: Probe, points_world: np.ndarray) -> float:
+    """`coverage_3d_pct` against every truth point some viewpoint sees, whatever the camera's
+    incidence limit (the observable truth before that limit counted): ghosts excluded alike."""
+    pts = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
+    in_sight = probe.gt.surface_points_world[probe.gt.in_sight]
+    if len(in_sight) == 0:
+        return 0.0
+    near = probe.near_surface(pts)
+    ghost, _, _ = probe.ghost_point_mask(pts, np.where(near, 0.0, np.inf))
+    covered = mx.covered_mask(pts[~ghost], in_sight, probe.ev.coverage_radius_m)
+    return 100.0 * float(covered.sum()) / len(in_sight)
+
+
 def distance_at(
     times_s: np.ndarray, tracks: Sequence[tuple[np.ndarray, np.ndarray]]
 ) -> list[float]:
@@ -228,6 +241,7 @@ def score(
     cov = np.array([r["coverage_3d_pct"] for r in series], dtype=np.float64)
     return mx.assemble_metrics(
         coverage_3d_pct=quality["coverage_3d_pct"],
+        coverage_3d_in_sight_pct=coverage_in_sight(probe, merged_points_world),
         coverage_2d_pct=probe.coverage_2d(merged_grid),
         overlap_3d_pct=quality["overlap_3d_pct"],
         overlap_2d_pct=probe.overlap_2d(robot_grids),

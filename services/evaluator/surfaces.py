@@ -141,16 +141,25 @@ def sample_triangles(
     return a[idx] + u[:, None] * (b[idx] - a[idx]) + v[:, None] * (c[idx] - a[idx]), idx
 
 
+def triangle_normals(tris: np.ndarray) -> np.ndarray:
+    """(T, 3) unit normals of (T, 3, 3) triangles (their winding's sign; zero for slivers)."""
+    normal = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    return normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+
+
 def surface_samples(
     model: mujoco.MjModel,
     density_per_m2: float = 1000.0,
     groups: tuple[int, ...] | None = None,
     seed: int = 0,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """World points uniform on the sensed static surfaces (module docstring).
 
-    Returns (N, 3) points_world and (N,) triangle ids (samples on one triangle share a plane
-    and a side, which lets the observability test share work between them).
+    Returns (N, 3) points_world, (N,) triangle ids (samples on one triangle share a plane
+    and a side, which lets the observability test share work between them) and (N, 3) the
+    unit normal of each sample's triangle (world frame, either sign).
     """
     rng = np.random.default_rng(seed)
-    return sample_triangles(world_triangles(model, groups), density_per_m2, rng)
+    tris = world_triangles(model, groups)
+    points, ids = sample_triangles(tris, density_per_m2, rng)
+    return points, ids, triangle_normals(tris)[ids] if len(tris) else np.zeros((0, 3))
