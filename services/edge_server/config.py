@@ -239,7 +239,7 @@ class EdgeConfig(BaseModel):
     complete_warmup_s: float = Field(default=3.0, ge=0, description="never complete before, sim s")
     complete_min_known_cells: int = Field(default=400, ge=0, description="map must be this big")
     complete_unexplored_fraction: float = Field(
-        default=0.0002, ge=0, lt=1, description="`space` also completes when the assignable "
+        default=0.0005, ge=0, lt=1, description="`space` also completes when the assignable "
         "F_u regions hold at most this fraction of the merged map's voxels for "
         "complete_unexplored_plans plans in a row (the tail: specks that add little "
         "coverage; docs/edge.md, 'The tail'); 0 = only when no frontier is assignable")
