@@ -107,6 +107,18 @@ def test_path_and_times() -> None:
     assert mx.t_at_coverage(t, cov, 99.9) is None
 
 
+def test_an_unsampled_mission_has_no_t90() -> None:
+    """With `--sample-every 0` the series is the final row alone: its time is the mapping
+    time, not the time 90 % was reached, so T90/T99 are unknown, not the mapping time."""
+    final = [{"sim_time_s": 187.0, "coverage_3d_pct": 99.2}]
+    assert mx.coverage_times(final, 0.0) == (None, None)
+    assert mx.coverage_times(final, 5.0) == (187.0, 187.0)
+    sampled = [{"sim_time_s": 5.0 * i, "coverage_3d_pct": c}
+               for i, c in enumerate([10, 60, 92, 99.1])]
+    assert mx.coverage_times(sampled, 5.0) == (10.0, 15.0)
+    assert mx.coverage_times(sampled, None) == (10.0, 15.0)  # folders from before the key
+
+
 def test_assemble_metrics_keys() -> None:
     record = mx.assemble_metrics(coverage_3d_pct=np.float64(97.5), robots=3, completed=True)
     assert tuple(record) == mx.METRICS_KEYS

@@ -245,6 +245,19 @@ def t_at_coverage(times_s: np.ndarray, coverage_pct: np.ndarray, pct: float) -> 
     return float(np.asarray(times_s)[reached[0]]) if len(reached) else None
 
 
+def coverage_times(series: Sequence[dict[str, Any]], sample_every_s: float | None
+                   ) -> tuple[float | None, float | None]:
+    """(T90, T99) from the time series' rows (sim_time_s, coverage_3d_pct). None for both
+    when the mission was not sampled (`sample_every_s` 0): the series then holds only the
+    final row, and the mapping time is no T90. `sample_every_s` None: a run folder from
+    before the launcher wrote it, taken as sampled."""
+    if sample_every_s is not None and sample_every_s <= 0:
+        return None, None
+    times = np.array([r["sim_time_s"] for r in series], dtype=np.float64)
+    cov = np.array([r["coverage_3d_pct"] for r in series], dtype=np.float64)
+    return t_at_coverage(times, cov, 90.0), t_at_coverage(times, cov, 99.0)
+
+
 def assemble_metrics(**values: Any) -> dict[str, Any]:
     """The metrics.json record: exactly METRICS_KEYS, missing ones None; unknown keys refused."""
     unknown = set(values) - set(METRICS_KEYS)

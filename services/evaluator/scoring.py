@@ -233,12 +233,12 @@ def score(
 ) -> dict[str, Any]:
     """Every SPEC §7 key. `tracks` / `est_tracks`: (stamps_s, xy) of each robot's ground-truth
     and estimated trajectory; `series` rows need sim_time_s and coverage_3d_pct (T90/T99);
-    `live` holds LIVE_KEYS; `identity` holds robots, world, planner, drf, seed."""
+    `live` holds LIVE_KEYS and sample_every_s (0: no T90/T99); `identity` holds robots,
+    world, planner, drf, seed."""
     quality = map_quality(probe, merged_points_world, robot_points)
     ate = [mx.ate_rmse_cm(t_gt, xy_gt, t_est, xy_est)
            for (t_gt, xy_gt), (t_est, xy_est) in zip(tracks, est_tracks, strict=True)]
-    times = np.array([r["sim_time_s"] for r in series], dtype=np.float64)
-    cov = np.array([r["coverage_3d_pct"] for r in series], dtype=np.float64)
+    t90_s, t99_s = mx.coverage_times(series, live.get("sample_every_s"))
     return mx.assemble_metrics(
         coverage_3d_pct=quality["coverage_3d_pct"],
         coverage_3d_in_sight_pct=coverage_in_sight(probe, merged_points_world),
@@ -247,8 +247,8 @@ def score(
         overlap_2d_pct=probe.overlap_2d(robot_grids),
         rmse_3d_cm=quality["rmse_3d_cm"],
         bounding_volume_pct=quality["bounding_volume_pct"],
-        t90_s=mx.t_at_coverage(times, cov, 90.0),
-        t99_s=mx.t_at_coverage(times, cov, 99.0),
+        t90_s=t90_s,
+        t99_s=t99_s,
         total_distance_m=sum(mx.path_length(xy) for _, xy in tracks),
         ate_rmse_cm=mx.mean_ate_cm(ate),
         ate_rmse_cm_per_robot=ate,
