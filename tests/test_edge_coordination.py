@@ -14,6 +14,7 @@ from services.edge_server.config import EdgeConfig
 from services.edge_server.coordination import (
     RobotStates,
     joint_match,
+    partition_factor,
     teammate_factor,
     travel_time_s,
     view_information,
@@ -100,6 +101,31 @@ def test_a_wider_teammate_radius_keeps_a_robot_out_of_a_teammates_room() -> None
     assert int(np.argmax(narrow.score(path, fs, robot)[0])) == 0
     wide = make_scorer("space", EdgeConfig(space_view_radius_m=1.0, space_teammate_radius_m=4.0))
     assert int(np.argmax(wide.score(path, fs, robot)[0])) == 1
+
+
+def test_partition_counts_a_goal_in_full_only_for_the_robot_nearest_it() -> None:
+    goals = np.array([[-4.0, 0.0], [4.0, 0.0], [0.0, 3.0]])
+    robots = np.array([[-1.0, 0.0], [1.0, 0.0]])
+    f = partition_factor(goals, robots, np.array([[0.0, 5.0]]), 0.5)
+    np.testing.assert_allclose(f, [[1.0, 0.5, 0.5], [0.5, 1.0, 0.5]])  # (0, 3) is the goal's
+    np.testing.assert_allclose(partition_factor(goals, robots, np.zeros((0, 2)), 1.0), 1.0)
+    alone = partition_factor(goals, robots[:1], np.zeros((0, 2)), 0.5)
+    np.testing.assert_allclose(alone, 1.0)  # no teammate, no partition
+
+
+def test_a_team_that_starts_together_fans_out_with_the_partition() -> None:
+    """Two robots side by side, a rich region just left of both and a poorer one far right:
+    without the partition the two share the near ones and nobody goes right; with it the
+    right-hand robot takes the far right region, its own side."""
+    fs = regions([(-1.0, 0.0), (-0.5, 1.0), (6.0, 0.0)], [1.0, 0.9, 0.8])
+    robots = RobotStates(np.array([[-0.2, 0.0], [0.2, 0.0]]), np.zeros(2), np.zeros((0, 2)))
+    path = np.hypot(*(fs.goal_xy[None, :, :] - robots.xy_world[:, None, :]).transpose(2, 0, 1))
+    plain = make_scorer("space", EdgeConfig(space_view_radius_m=0.0))
+    assert sorted(plain.match(plain.score(path, fs, robots)).values()) == [0, 1]
+    part = make_scorer("space", EdgeConfig(space_view_radius_m=0.0,
+                                           space_partition_discount=0.2))
+    matched = part.match(part.score(path, fs, robots))
+    assert matched[1] == 2 and matched[0] in (0, 1)
 
 
 def test_mission_config_gives_the_edge_the_agents_speeds() -> None:

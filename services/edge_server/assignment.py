@@ -105,7 +105,8 @@ class SpaceScorer:
             min_time_s=c.revenue_min_path_m / c.nav_v_mps, grid_gain_per_m=c.space_grid_gain_per_m,
             grid_view_m=c.space_grid_view_m,
             teammate_radius_m=c.space_teammate_radius_m or c.space_view_radius_m,
-            size_exponent=c.space_size_exponent, size_ref=float(c.unexplored_min_voxels))
+            size_exponent=c.space_size_exponent, size_ref=float(c.unexplored_min_voxels),
+            partition_discount=c.space_partition_discount)
 
     def match(self, scores: np.ndarray) -> dict[int, int]:
         return joint_match(scores) if self.config.space_joint else greedy_match(scores)

@@ -98,6 +98,10 @@ class EdgeConfig(BaseModel):
         default=0.0, ge=0, le=1, description="`space`: a region's information also grows as "
         "(its voxels / unexplored_min_voxels)^this, so a large region outbids a speck at the "
         "same distance; 0: I_t·I_g alone, whatever the size")
+    space_partition_discount: float = Field(
+        default=1.0, gt=0, le=1, description="`space`: a goal nearer (straight line) to a "
+        "teammate or a teammate's goal than to the robot counts this much (each robot's "
+        "Voronoi cell of the team in full); 1: no partition")
     space_grid_gain_per_m: float = Field(
         default=0.0, ge=0, description="`space`: a goal is also worth this per metre of 2D "
         "grid frontier within space_grid_view_m of it (the unknown floor it looks into), so "

@@ -58,6 +58,30 @@ def teammate_factor(centroid_xy: np.ndarray, held_goals_xy: np.ndarray, radius_m
     return np.where((d2 <= radius_m**2).any(axis=1), discount, 1.0)
 
 
+def partition_factor(goal_xy: np.ndarray, robots_xy: np.ndarray, held_goals_xy: np.ndarray,
+                     discount: float) -> np.ndarray:
+    """(R, F) `discount` where a teammate of robot r (another robot, or a goal a robot holds)
+    is nearer f′ in a straight line than r is, 1 elsewhere: each robot's own part of the
+    map (its Voronoi cell among the team) counts in full, so a team that starts together
+    fans out instead of cleaning up one room together."""
+    goal_xy = np.asarray(goal_xy, np.float64).reshape(-1, 2)
+    robots_xy = np.asarray(robots_xy, np.float64).reshape(-1, 2)
+    held = np.asarray(held_goals_xy, np.float64).reshape(-1, 2)
+    R, F = len(robots_xy), len(goal_xy)
+    if discount >= 1.0 or not F or R + len(held) < 2:
+        return np.ones((R, F))
+    own = np.hypot(*(goal_xy[None, :, :] - robots_xy[:, None, :]).transpose(2, 0, 1))
+    if R > 1:
+        order = np.sort(own, axis=0)  # per f′: the nearest robot's distance, the next one's
+        other = np.where(own <= order[0][None, :], order[1][None, :], order[0][None, :])
+    else:
+        other = np.full((R, F), np.inf)
+    if len(held):
+        d_held = np.hypot(*(goal_xy[None, :, :] - held[:, None, :]).transpose(2, 0, 1))
+        other = np.minimum(other, d_held.min(axis=0)[None, :])
+    return np.where(other < own, discount, 1.0)
+
+
 def travel_time_s(path_m: np.ndarray, robots_xy: np.ndarray, robots_yaw: np.ndarray,
                   goal_xy: np.ndarray, v_mps: float, omega_radps: float) -> np.ndarray:
     """(R, F) path / v + |bearing to f′ − heading| / ω; inf where the path is."""
@@ -93,13 +117,15 @@ def coordinated_revenue(
     path_m: np.ndarray, frontiers: FrontierSet, robots: RobotStates, *, v_mps: float,
     omega_radps: float, view_radius_m: float, teammate_discount: float, min_time_s: float,
     grid_gain_per_m: float = 0.0, grid_view_m: float = 0.0, teammate_radius_m: float | None = None,
-    size_exponent: float = 0.0, size_ref: float = 1.0,
+    size_exponent: float = 0.0, size_ref: float = 1.0, partition_discount: float = 1.0,
 ) -> np.ndarray:
     """(R, F) view information (teammates' discounted) per second of travel; −inf unreachable.
     With `grid_gain_per_m`, a goal is also worth that much per metre of 2D grid frontier
     near it (`frontiers.grid_frontier_m`), discounted where a teammate's goal is as near.
     `teammate_radius_m` (default `view_radius_m`): how near a teammate's goal discounts.
-    `size_exponent` > 0: each region's information × (its size / `size_ref`)^that."""
+    `size_exponent` > 0: each region's information × (its size / `size_ref`)^that.
+    `partition_discount` < 1: a goal nearer a teammate than the robot counts that much
+    (`partition_factor`)."""
     if teammate_radius_m is None:
         teammate_radius_m = view_radius_m
     n = len(frontiers)
@@ -115,6 +141,8 @@ def coordinated_revenue(
             frontiers.goal_xy, robots.held_goals_xy, grid_view_m, teammate_discount)
     t = travel_time_s(path_m, robots.xy_world, robots.yaw_world, frontiers.goal_xy, v_mps,
                       omega_radps)
+    part = partition_factor(frontiers.goal_xy, robots.xy_world, robots.held_goals_xy,
+                            partition_discount)
     with np.errstate(divide="ignore", invalid="ignore"):
-        u = view[None, :] / np.maximum(t, min_time_s)
+        u = view[None, :] * part / np.maximum(t, min_time_s)
     return np.where(np.isfinite(path_m), u, -np.inf)
