@@ -3,7 +3,8 @@ writes them, for missions run one by one (`spacemap run ... --out DIR`).
 
     .venv/bin/python bench/bench_tables.py OUT_DIR RUN_DIR [RUN_DIR ...]
 
-A run's method is its planner (`standalone` when it ran without the DRF), its world and
+A run's method is its planner (`standalone` when it ran without the DRF, `space-merger` with
+the map merger on: `tables.method_name`), its world and
 robot count come from its metrics.json; Fig. 5 needs runs with a time series
 (`--sample-every` > 0). Folders without metrics.json are listed and left out; other paths
 (logs beside the runs) are ignored.
@@ -17,14 +18,20 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from services.evaluator.evaluate import RunConfig
 from services.evaluator.plots import world_label
+from services.evaluator.tables import method_name
 from services.launcher.bench import write_outputs
 
 
 def record(run_dir: Path) -> dict[str, Any]:
     """One bench record from a run folder's metrics.json."""
     metrics = json.loads((run_dir / "metrics.json").read_text())
-    method = metrics["planner"] if metrics.get("drf", True) else "standalone"
+    merge = metrics.get("merge")
+    if merge is None:  # a run from before metrics.json named it
+        config = run_dir / "config.yaml"
+        merge = config.exists() and RunConfig.read(config).merge
+    method = method_name(metrics["planner"], metrics.get("drf", True), bool(merge))
     return {**metrics, "method": method, "world_label": world_label(str(metrics["world"])),
             "run_dir": str(run_dir)}
 

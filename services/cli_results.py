@@ -56,7 +56,7 @@ def _csv_list(text: str, cast: type = str) -> tuple:
 
 def bench(
     quick: Annotated[bool, typer.Option("--quick", help="house, 3 robots, all methods, "
-                                        "seeds 0,1, 150 s cap (10 runs, 15-25 min here); "
+                                        "seeds 0,1, 150 s cap (14 runs, 20-35 min here); "
                                         "default: house, bookstore, AWS house × 3, 6 "
                                         "robots × all methods × seeds 0-2, 600 s")] = False,
     worlds: Annotated[str | None, typer.Option("--worlds", help="names or MJCF paths, "

@@ -33,21 +33,23 @@ class RunConfig:
     sim: SimConfig
     planner: str
     drf: bool
+    merge: bool = False  # the edge's map merger (`edge.merge`)
 
     @classmethod
     def of(cls, config: SpacemapConfig) -> RunConfig:
-        return cls(config.sim, config.edge.planner, config.agent.drf)
+        return cls(config.sim, config.edge.planner, config.agent.drf, config.edge.merge)
 
     @classmethod
     def read(cls, path: Path) -> RunConfig:
         tree = yaml.safe_load(path.read_text()) or {}
         sim = {k: v for k, v in tree.get("sim", {}).items() if k in SimConfig.model_fields}
-        return cls(SimConfig.model_validate(sim), tree.get("edge", {}).get("planner", "space"),
-                   bool(tree.get("agent", {}).get("drf", True)))
+        edge = tree.get("edge", {})
+        return cls(SimConfig.model_validate(sim), edge.get("planner", "space"),
+                   bool(tree.get("agent", {}).get("drf", True)), bool(edge.get("merge", False)))
 
     def identity(self) -> dict[str, Any]:
         return {"robots": self.sim.robots, "world": self.sim.world, "planner": self.planner,
-                "drf": self.drf, "seed": self.sim.seed}
+                "drf": self.drf, "merge": self.merge, "seed": self.sim.seed}
 
 
 def load_tracks(

@@ -21,7 +21,7 @@ METRICS_KEYS = (
     "overlap_2d_pct", "rmse_3d_cm",
     "bounding_volume_pct", "mapping_time_s", "t90_s", "t99_s", "total_distance_m",
     "bytes_per_robot", "ate_rmse_cm", "ate_rmse_cm_per_robot", "sim_time_s", "wall_time_s",
-    "robots", "world", "planner", "drf", "seed", "completed",
+    "robots", "world", "planner", "drf", "merge", "seed", "completed",
 )
 
 

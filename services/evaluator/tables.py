@@ -8,23 +8,44 @@ import csv
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
-# method name → (planner, drf)
-METHODS: dict[str, tuple[str, bool]] = {
-    "standalone": ("space", False),
-    "space": ("space", True),
-    "space-paper": ("space-paper", True),
-    "nearest": ("nearest", True),
-    "utility": ("utility", True),
-    "rrt": ("rrt", True),
+
+class Method(NamedTuple):
+    """What a bench method sets in the mission config."""
+
+    planner: str  # edge.planner
+    drf: bool  # agent.drf (False: the standalone mapping baseline)
+    merge: bool | None = None  # edge.merge; None: as the base config has it
+
+
+METHODS: dict[str, Method] = {
+    "standalone": Method("space", False),
+    "space": Method("space", True),
+    # the paper's coherent map merger (pose graph + LM) on: Table I's merger column
+    "space-merger": Method("space", True, merge=True),
+    "space-paper": Method("space-paper", True),
+    "nearest": Method("nearest", True),
+    "utility": Method("utility", True),
+    "rrt": Method("rrt", True),
 }
-TABLE1_METHODS = ("standalone", "space")
+TABLE1_METHODS = ("standalone", "space", "space-merger")
+
+
+def method_name(planner: str, drf: bool, merge: bool = False) -> str:
+    """The bench method a run's config amounts to (the planner's name when none fits)."""
+    for name, how in METHODS.items():
+        if (how.planner, how.drf, bool(how.merge)) == (planner, drf, merge):
+            return name
+    return planner if drf else "standalone"
+
+
 TABLE2_METHODS = ("nearest", "utility", "rrt", "space-paper", "space")
 TABLE1_METRICS = {
     "coverage_3d_pct": "3D coverage (%)", "bounding_volume_pct": "bounding volume (%)",
     "rmse_3d_cm": "3D RMSE (cm)", "ate_rmse_cm": "ATE (cm)",
     "overlap_3d_pct": "3D overlap (%)", "coverage_2d_pct": "2D coverage (%)",
+    "mapping_time_s": "mapping time (s)",
 }
 TABLE2_METRICS = {
     "mapping_time_s": "mapping time (s)", "t90_s": "T90 3D (s)", "total_distance_m":

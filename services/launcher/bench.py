@@ -46,12 +46,14 @@ def full_spec() -> BenchSpec:
 
 def mission_config(base: SpacemapConfig, world: str, robots: int, method: str, seed: int,
                    sim_time_s: float) -> SpacemapConfig:
-    planner, drf = tb.METHODS[method]
+    how = tb.METHODS[method]
     tree = base.model_dump(mode="json")
     tree["sim"].update(world=world, robots=robots, seed=seed, max_sim_time_s=sim_time_s,
                        spawn=None)
-    tree["edge"]["planner"] = planner
-    tree["agent"]["drf"] = drf
+    tree["edge"]["planner"] = how.planner
+    tree["agent"]["drf"] = how.drf
+    if how.merge is not None:
+        tree["edge"]["merge"] = how.merge
     return SpacemapConfig.model_validate(tree)
 
 
@@ -104,7 +106,7 @@ def write_outputs(records: list[dict[str, Any]], out_dir: Path) -> None:
     """table1.md/.csv, table2.md/.csv, tables.md and fig5_<world>_<robots>r.png."""
     ok = [r for r in records if "failed" not in r]
     t1 = tb.table_markdown(ok, tb.TABLE1_METHODS, tb.TABLE1_METRICS,
-                           "Table I: mapping, standalone (no DRF) vs SPACE")
+                           "Table I: mapping, standalone (no DRF) vs SPACE, map merger off and on")
     t2 = tb.table_markdown(ok, tb.TABLE2_METHODS, tb.TABLE2_METRICS,
                            "Table II: exploration, nearest / utility / rrt vs SPACE")
     (out_dir / "table1.md").write_text(t1)
