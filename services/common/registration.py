@@ -4,11 +4,14 @@ A pair is a candidate when the two submaps belong to different robots and their 
 (at the current estimates) overlap by at least `min_overlap_m3`. GICP starts from the current
 relative estimate; a result is kept only when it converged, enough source points found a
 partner and it moved the estimate less than a gate (a registration that wanders far is more
-likely a wrong basin than a correction). small_gicp's Hessian H is already in GTSAM's
-convention (rotation first, right perturbation of T_target_source); its absolute scale depends
-on point count and covariances, so it is rescaled to a mean translational σ of `sigma_m`
-before the robust kernels judge residuals (field notes), keeping its shape (weak directions of
-a corridor stay weak).
+likely a wrong basin than a correction). Two optional gates judge the fit itself: the GICP
+residual per inlier (a registration 5-10 cm off leaves surfaces apart that its inliers still
+pair) and the planar condition (strongest over weakest translational information in the
+plane: shelves and aisles that repeat slide along themselves). small_gicp's Hessian H is
+already in GTSAM's convention (rotation first, right perturbation of T_target_source); its
+absolute scale depends on point count and covariances, so it is rescaled to a mean
+translational σ of `sigma_m` before the robust kernels judge residuals (field notes), keeping
+its shape (weak directions of a corridor stay weak).
 """
 
 from __future__ import annotations
@@ -34,6 +37,8 @@ class RegistrationParams:
     max_shift_m: float = 0.5
     max_turn_rad: float = 0.2
     sigma_m: float = 0.01
+    max_mean_error: float = float("inf")  # GICP residual per inlier (small_gicp's `error`)
+    max_planar_condition: float = float("inf")  # strongest / weakest planar translation info
 
 
 @dataclass(frozen=True)
@@ -50,6 +55,22 @@ def world_box(box_submap: np.ndarray, T_world_submap: np.ndarray) -> np.ndarray:
                         for z in (lo[2], hi[2])])
     world = corners @ T_world_submap[:3, :3].T + T_world_submap[:3, 3]
     return np.stack([world.min(axis=0), world.max(axis=0)])
+
+
+def planar_condition(H: np.ndarray) -> float:
+    """Strongest over weakest eigenvalue of the x, y information of a GICP Hessian (rotation
+    first), with z, roll, pitch and then yaw marginalised: how much worse a registration pins
+    the weakest horizontal direction than the strongest (inf: one direction is free)."""
+    H = 0.5 * (H + H.T)
+    planar, rest = [3, 4, 2], [5, 0, 1]  # tx, ty, rz | tz, rx, ry
+    A, B, C = H[np.ix_(planar, planar)], H[np.ix_(planar, rest)], H[np.ix_(rest, rest)]
+    try:
+        Hp = A - B @ np.linalg.solve(C, B.T)
+    except np.linalg.LinAlgError:
+        Hp = A
+    Ht = Hp[:2, :2] - np.outer(Hp[:2, 2], Hp[2, :2]) / Hp[2, 2] if Hp[2, 2] > 0 else Hp[:2, :2]
+    weakest, strongest = np.linalg.eigvalsh(Ht)
+    return float(strongest / weakest) if weakest > 0 else float("inf")
 
 
 def scaled_info(H: np.ndarray, sigma_m: float) -> np.ndarray:
@@ -99,6 +120,9 @@ def register(
     step = Pose3.Logmap(Pose3(T_target_source_init).between(Pose3(res.T_target_source)))
     if (not res.converged or frac < params.min_inlier_frac
             or np.linalg.norm(step[3:]) > params.max_shift_m
-            or np.linalg.norm(step[:3]) > params.max_turn_rad):
+            or np.linalg.norm(step[:3]) > params.max_turn_rad
+            or res.error > params.max_mean_error * max(res.num_inliers, 1)
+            or (params.max_planar_condition < float("inf")
+                and planar_condition(res.H) > params.max_planar_condition)):
         return None
     return PairResult(res.T_target_source.copy(), scaled_info(res.H, params.sigma_m), frac)

@@ -206,6 +206,16 @@ class EdgeConfig(BaseModel):
     merge_registration_sigma_m: float = Field(
         default=0.05, gt=0, description="a registration edge's information is scaled to this "
         "mean translational σ (its shape is the registration's Hessian)")
+    merge_max_shift_m: float = Field(
+        default=0.5, gt=0, description="a registration that moves the pair's estimate further "
+        "is rejected (repeating shelves alias by their spacing, 40 cm in the bookstore)")
+    merge_max_mean_error: float = Field(
+        default=0.0, ge=0, description="a registration whose GICP residual per inlier "
+        "is above this is rejected (0: no test)")
+    merge_max_condition: float = Field(
+        default=0.0, ge=0, description="a registration whose planar translation "
+        "information is this much weaker in one direction than the other is rejected (0: no "
+        "test)")
     # assignment
     keep_radius_m: float = Field(
         default=0.5, ge=0, description="hysteresis: a goal is kept while a frontier lies this close"

@@ -77,7 +77,10 @@ def merger_params(config: EdgeConfig) -> MergerParams:
         report_sigma_per_m=config.merge_report_sigma_per_m,
         report_sigma_rad=config.merge_report_sigma_rad,
         max_registrations=config.max_registrations,
-        registration=RegistrationParams(sigma_m=config.merge_registration_sigma_m),
+        registration=RegistrationParams(
+            sigma_m=config.merge_registration_sigma_m, max_shift_m=config.merge_max_shift_m,
+            max_mean_error=config.merge_max_mean_error or float("inf"),
+            max_planar_condition=config.merge_max_condition or float("inf")),
         consistency=ConsistencyParams(
             tol_m=config.merge_pcm_tol_m, tol_m_per_m=config.merge_pcm_tol_m_per_m,
             tol_rad=config.merge_pcm_tol_rad, tol_rad_per_m=config.merge_pcm_tol_rad_per_m,
