@@ -206,6 +206,11 @@ class EdgeConfig(BaseModel):
     merge_registration_sigma_m: float = Field(
         default=0.05, gt=0, description="a registration edge's information is scaled to this "
         "mean translational σ (its shape is the registration's Hessian)")
+    merge_precheck_m: float = Field(
+        default=0.0, ge=0, description="> 0: a candidate pair is registered only when this "
+        "share of the source's points lie within this of the target's at the current estimate "
+        "(merge_precheck_frac); the others are set aside without costing a registration")
+    merge_precheck_frac: float = Field(default=0.4, ge=0, le=1, description="... this share")
     merge_max_shift_m: float = Field(
         default=0.5, gt=0, description="a registration that moves the pair's estimate further "
         "is rejected (repeating shelves alias by their spacing, 40 cm in the bookstore)")

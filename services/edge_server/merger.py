@@ -7,7 +7,11 @@ newer submap first arrives: T_a_b = T_world_a⁻¹·T_reported_b, with T_world_a
 pose when the edge corrected a (the agent re-anchors its odometry frame on the newest
 corrected submap, which is a). Pairs of submaps of different robots whose world boxes overlap
 are registered once both are closed (their robot has started a newer one), at most
-`max_registrations` per update, so the cost is amortised across ticks. LM runs only when the
+`max_registrations` per update, so the cost is amortised across ticks. With a precheck set,
+a pair is first asked cheaply whether enough of the source's points lie near the target's
+at the current estimate (three in four box-overlapping pairs share too little surface to
+pass the registration's inlier test); one that does not is set aside untried and costs
+none of the update's registrations. LM runs only when the
 graph changed and holds at least one registration edge; until then placements follow reports.
 """
 
@@ -57,6 +61,9 @@ class MergerParams:
     min_overlap_m3: float = 0.5
     min_points: int = 200
     max_registrations: int = 2
+    precheck_m: float = 0.0  # > 0: a source point within this of a target point counts ...
+    precheck_frac: float = 0.4  # ... and a pair whose share is below this is not registered
+    max_prechecks: int = 64  # pairs asked per update at most
     correction_tol_m: float = 0.01
     correction_tol_rad: float = 0.004
     registration: RegistrationParams = field(
@@ -77,6 +84,8 @@ def merger_params(config: EdgeConfig) -> MergerParams:
         report_sigma_per_m=config.merge_report_sigma_per_m,
         report_sigma_rad=config.merge_report_sigma_rad,
         max_registrations=config.max_registrations,
+        precheck_m=config.merge_precheck_m,
+        precheck_frac=config.merge_precheck_frac,
         registration=RegistrationParams(
             sigma_m=config.merge_registration_sigma_m, max_shift_m=config.merge_max_shift_m,
             max_mean_error=config.merge_max_mean_error or float("inf"),
@@ -177,6 +186,31 @@ class MapMerger:
             self._prepared[sm.key] = cached
         return cached[1]
 
+    def _near_share(self, target: StoredSubmap, source: StoredSubmap) -> float:
+        """Share of the source's fine points within `precheck_m` of a target point, at the
+        current estimates."""
+        tgt, src = self._prepared_of(target), self._prepared_of(source)
+        T = invert(self.estimates[target.key]) @ self.estimates[source.key]
+        points = np.asarray(src.fine[0].points())[:, :3] @ T[:3, :3].T + T[:3, 3]
+        _, d2 = tgt.fine[1].batch_nearest_neighbor_search(points, num_threads=1)
+        return float(np.mean(np.asarray(d2) < self.params.precheck_m**2)) if len(points) else 0.0
+
+    def _worth_registering(self, pairs: list[tuple[StoredSubmap, StoredSubmap]]
+                           ) -> list[tuple[StoredSubmap, StoredSubmap]]:
+        """The first `max_registrations` pairs that pass the precheck; the ones that fail
+        are recorded as tried (None)."""
+        if self.params.precheck_m <= 0:
+            return pairs[: self.params.max_registrations]
+        chosen = []
+        for target, source in pairs[: self.params.max_prechecks]:
+            if len(chosen) == self.params.max_registrations:
+                break
+            if self._near_share(target, source) >= self.params.precheck_frac:
+                chosen.append((target, source))
+            else:
+                self.registrations[(target.key, source.key)] = None
+        return chosen
+
     def _register(self, target: StoredSubmap, source: StoredSubmap) -> None:
         T_init = invert(self.estimates[target.key]) @ self.estimates[source.key]
         result = register(self._prepared_of(target), self._prepared_of(source), T_init,
@@ -210,7 +244,7 @@ class MapMerger:
                 if sm.key not in self.estimates:
                     self._add_node(sm, sms[i - 1] if i else None)
             closed += [sm for sm in sms[:-1] if sm.keys.size >= self.params.min_points]
-        for target, source in self._candidates(closed)[: self.params.max_registrations]:
+        for target, source in self._worth_registering(self._candidates(closed)):
             self._register(target, source)
         edges = [e for e in self.registrations.values() if e is not None]
         if not self._dirty or not edges:

@@ -1,0 +1,84 @@
+"""Pairwise registration gates: the fit's residual, the planar condition, the shift."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from services.common.geometry import T_from_xyyaw, invert
+from services.common.registration import (
+    RegistrationParams,
+    planar_condition,
+    prepare,
+    register,
+)
+from services.config import load_config
+from services.edge_server.merger import merger_params
+from tests.test_edge_merger import crop, scene
+
+
+def _corridor() -> np.ndarray:
+    """Two long parallel walls and a floor at 2 cm: nothing pins a slide along x."""
+    s = 0.02
+    x, z = np.arange(0, 8.0, s), np.arange(0, 1.5, s)
+    walls = [np.stack(np.meshgrid(x, [y], z), -1).reshape(-1, 3) for y in (0.0, 2.0)]
+    floor = np.stack(np.meshgrid(x, np.arange(0, 2.0, s), [0.0]), -1).reshape(-1, 3)
+    return np.concatenate([*walls, floor])
+
+
+def test_planar_condition_is_one_for_isotropic_and_large_for_one_weak_direction() -> None:
+    assert abs(planar_condition(np.eye(6)) - 1.0) < 1e-9
+    H = np.eye(6)
+    H[3, 3] = 1e-4  # x barely constrained
+    assert planar_condition(H) > 1e3
+    H[3, 3] = 0.0
+    assert planar_condition(H) == float("inf")
+
+
+def test_a_corridor_registration_passes_until_the_condition_gate_is_set() -> None:
+    world = _corridor()
+    T_a, T_b = T_from_xyyaw(3.0, 1.0, 0.0), T_from_xyyaw(4.0, 1.0, 0.0)
+    params = RegistrationParams(sigma_m=0.05)
+    a, b = prepare(crop(world, T_a), params), prepare(crop(world, T_b), params)
+    T_init = invert(T_a) @ T_from_xyyaw(4.05, 1.03, 0.0)
+    assert register(a, b, T_init, params) is not None
+    gated = RegistrationParams(sigma_m=0.05, max_planar_condition=20.0)
+    assert register(a, b, T_init, gated) is None
+
+
+def test_the_residual_gate_rejects_a_poor_fit_and_keeps_a_good_one() -> None:
+    world = scene()
+    T_a, T_b = T_from_xyyaw(2.5, 2.0, 0.1), T_from_xyyaw(3.2, 2.1, 0.3)
+    params = RegistrationParams(sigma_m=0.05, max_mean_error=0.015)
+    a = prepare(crop(world, T_a), params)
+    T_init = invert(T_a) @ T_from_xyyaw(3.24, 2.07, 0.31)
+    clean = prepare(crop(world, T_b), params)
+    result = register(a, clean, T_init, params)
+    assert result is not None
+    truth = invert(T_a) @ T_b
+    assert np.linalg.norm(result.T_target_source[:2, 3] - truth[:2, 3]) < 0.02
+    # the same view with its surfaces blurred by 4 cm: it still converges, but apart
+    rng = np.random.default_rng(3)
+    points_b = crop(world, T_b)
+    blurred = prepare(points_b + rng.normal(0.0, 0.04, points_b.shape), params)
+    assert register(a, blurred, T_init, RegistrationParams(sigma_m=0.05)) is not None
+    assert register(a, blurred, T_init, params) is None
+
+
+def test_the_shift_gate_rejects_a_registration_that_moves_the_estimate_too_far() -> None:
+    world = scene()
+    T_a, T_b = T_from_xyyaw(2.5, 2.0, 0.1), T_from_xyyaw(3.2, 2.1, 0.3)
+    params = RegistrationParams(sigma_m=0.05)
+    a, b = prepare(crop(world, T_a), params), prepare(crop(world, T_b), params)
+    T_init = invert(T_a) @ T_from_xyyaw(3.32, 2.1, 0.3)  # 12 cm off
+    assert register(a, b, T_init, params) is not None
+    assert register(a, b, T_init, RegistrationParams(sigma_m=0.05, max_shift_m=0.08)) is None
+
+
+def test_the_edge_config_sets_the_merger_gates_and_zero_turns_them_off() -> None:
+    off = merger_params(load_config(None, {}).edge).registration
+    assert off.max_mean_error == float("inf") and off.max_planar_condition == float("inf")
+    on = merger_params(load_config(None, {"edge.merge_max_mean_error": "0.015",
+                                          "edge.merge_max_condition": "20",
+                                          "edge.merge_max_shift_m": "0.25"}).edge).registration
+    assert (on.max_mean_error, on.max_planar_condition, on.max_shift_m) == (0.015, 20.0, 0.25)
+
