@@ -171,3 +171,26 @@ def test_left_to_right_information() -> None:
     ad_inv = Pose3(T).inverse().AdjointMap()  # Exp(ξ)·T = T·Exp(Ad(T⁻¹)ξ)
     cov_right = ad_inv @ np.linalg.inv(info_left) @ ad_inv.T
     assert np.allclose(np.linalg.inv(info_right), cov_right)
+
+
+def test_registrations_per_update_scale_with_the_team() -> None:
+    store, _ = build_store(T_from_xyyaw(0.05, 0.0, 0.01))
+    fixed = MapMerger(V, MergerParams(max_registrations=1))
+    fixed.update(store)
+    scaled = MapMerger(V, MergerParams(max_registrations=1, registrations_per_robot=1.5))
+    scaled.update(store)
+    assert len(fixed.registrations) == 1  # two robots with submaps: 1.5 × 2 = 3 pairs
+    assert len(scaled.registrations) == 3
+    budget = MapMerger(V, MergerParams(max_registrations=2, registrations_per_robot=1 / 3))
+    assert [budget.registration_budget(n) for n in (3, 6, 24)] == [2, 2, 8]
+
+
+def test_the_precheck_sets_aside_pairs_without_costing_registrations() -> None:
+    store, _ = build_store(np.eye(4))
+    strict = MapMerger(V, MergerParams(max_registrations=1, precheck_m=0.25, precheck_frac=1.01))
+    strict.update(store)  # no pair can pass: all are asked, none registered
+    assert len(strict.registrations) > 1
+    assert all(edge is None for edge in strict.registrations.values())
+    usual = MapMerger(V, MergerParams(max_registrations=1, precheck_m=0.25))
+    usual.update(store)  # a pair at the truth shares its surfaces and is registered
+    assert sum(edge is not None for edge in usual.registrations.values()) == 1

@@ -81,4 +81,5 @@ def test_the_edge_config_sets_the_merger_gates_and_zero_turns_them_off() -> None
                                           "edge.merge_max_condition": "20",
                                           "edge.merge_max_shift_m": "0.25"}).edge).registration
     assert (on.max_mean_error, on.max_planar_condition, on.max_shift_m) == (0.015, 20.0, 0.25)
-
+    scaled = merger_params(load_config(None, {"edge.merge_registrations_per_robot": "0.34"}).edge)
+    assert scaled.registrations_per_robot == 0.34

@@ -178,6 +178,9 @@ class EdgeConfig(BaseModel):
                         "(off by default: with its registration gates it lowers the ATE "
                         "everywhere but costs 3-9x the edge's CPU, docs/edge.md)")
     max_registrations: int = Field(default=1, ge=0, description="pair registrations per plan")
+    merge_registrations_per_robot: float = Field(
+        default=0.0, ge=0, description="... or this many per robot with submaps, where that is "
+        "more (a large team needs more: docs/edge.md, \"Registrations the merger can trust\")")
     merge_odometry_sigma_m: float = Field(
         default=0.01, gt=0, description="σ x, y of the odometry edge between consecutive submaps")
     merge_odometry_sigma_per_m: float = Field(

@@ -61,6 +61,7 @@ class MergerParams:
     min_overlap_m3: float = 0.5
     min_points: int = 200
     max_registrations: int = 2
+    registrations_per_robot: float = 0.0  # ... or this many per robot with submaps, if more
     precheck_m: float = 0.0  # > 0: a source point within this of a target point counts ...
     precheck_frac: float = 0.4  # ... and a pair whose share is below this is not registered
     max_prechecks: int = 64  # pairs asked per update at most
@@ -84,6 +85,7 @@ def merger_params(config: EdgeConfig) -> MergerParams:
         report_sigma_per_m=config.merge_report_sigma_per_m,
         report_sigma_rad=config.merge_report_sigma_rad,
         max_registrations=config.max_registrations,
+        registrations_per_robot=config.merge_registrations_per_robot,
         precheck_m=config.merge_precheck_m,
         precheck_frac=config.merge_precheck_frac,
         registration=RegistrationParams(
@@ -195,15 +197,22 @@ class MapMerger:
         _, d2 = tgt.fine[1].batch_nearest_neighbor_search(points, num_threads=1)
         return float(np.mean(np.asarray(d2) < self.params.precheck_m**2)) if len(points) else 0.0
 
-    def _worth_registering(self, pairs: list[tuple[StoredSubmap, StoredSubmap]]
+    def registration_budget(self, robots: int) -> int:
+        """Registrations per update for a team of this many robots with submaps: a large
+        team's chains drift further and meet more teammates (the warehouse replay's error
+        fell with more registrations per update, the small worlds' did not)."""
+        scaled = round(self.params.registrations_per_robot * robots)
+        return max(self.params.max_registrations, scaled)
+
+    def _worth_registering(self, pairs: list[tuple[StoredSubmap, StoredSubmap]], budget: int
                            ) -> list[tuple[StoredSubmap, StoredSubmap]]:
-        """The first `max_registrations` pairs that pass the precheck; the ones that fail
-        are recorded as tried (None)."""
+        """The first `budget` pairs that pass the precheck; the ones that fail are recorded
+        as tried (None)."""
         if self.params.precheck_m <= 0:
-            return pairs[: self.params.max_registrations]
+            return pairs[:budget]
         chosen = []
         for target, source in pairs[: self.params.max_prechecks]:
-            if len(chosen) == self.params.max_registrations:
+            if len(chosen) == budget:
                 break
             if self._near_share(target, source) >= self.params.precheck_frac:
                 chosen.append((target, source))
@@ -244,7 +253,8 @@ class MapMerger:
                 if sm.key not in self.estimates:
                     self._add_node(sm, sms[i - 1] if i else None)
             closed += [sm for sm in sms[:-1] if sm.keys.size >= self.params.min_points]
-        for target, source in self._worth_registering(self._candidates(closed)):
+        budget = self.registration_budget(len(by_robot))
+        for target, source in self._worth_registering(self._candidates(closed), budget):
             self._register(target, source)
         edges = [e for e in self.registrations.values() if e is not None]
         if not self._dirty or not edges:
