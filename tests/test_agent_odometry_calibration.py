@@ -250,3 +250,65 @@ def test_pose_messages_carry_seven_finite_calibration_sums() -> None:
         with pytest.raises(ValueError):
             RobotPose(robot_id=1, tick=3, stamp_ns=300, pose_world=Pose2D(x=0, y=0, yaw=0),
                       odometry_stats=bad)
+
+
+def _aisle_segment(true_m: float, short_m: float, scale: float = 0.02) -> object:
+    """A straight segment whose end registration lags the truth by `short_m` (a map built
+    along an aisle slides with the poses it was built from)."""
+    from services.robot_agent.odometry_calibration import segment_between
+
+    odom = (1 + scale) * true_m
+    return segment_between(np.zeros(3), np.array([odom, 0.0, 0.0]), np.zeros(3),
+                           np.array([true_m - short_m, 0.0, 0.0]), 0.0, odom, odom, 0.0)
+
+
+def _fleet_stats() -> np.ndarray:
+    from services.robot_agent.odometry_calibration import Calibration
+
+    fleet = Calibration(CalibrationParams(min_segments_for_outliers=10**6))
+    for seg in _segments(2, 60, scale=0.02):
+        fleet.add(seg)
+    return fleet.own_stats()
+
+
+def test_a_long_segment_that_slid_weighs_less_with_a_slide_allowance() -> None:
+    """A 4.5 m aisle segment 10 cm short pulls a robot on the fleet's 2 % wheels past 3 %
+    when its registration is trusted to 1 cm; allowing 1 cm per metre, it pulls to ~2.5 %."""
+    from services.robot_agent.odometry_calibration import Calibration
+
+    scales = []
+    for slide in (0.0, 0.01):
+        cal = Calibration(CalibrationParams(fleet_prior_segments=8.0, slide_per_m=slide,
+                                            min_segments_for_outliers=10**6))
+        cal.set_fleet(_fleet_stats())
+        assert cal.add(_aisle_segment(4.5, 0.10))  # type: ignore[arg-type]
+        scales.append(cal.errors.scale)
+    assert scales[0] > 0.029
+    assert 0.02 < scales[1] < 0.027
+
+
+def test_the_fleets_fit_tests_a_robots_first_segments() -> None:
+    """A first segment 8 cm short over 1 m is left out when the teammates' fit counts toward
+    the outlier test, and fitted in when it does not (the robot's own count is 0)."""
+    from services.robot_agent.odometry_calibration import Calibration
+
+    for counts in (True, False):
+        cal = Calibration(CalibrationParams(fleet_prior_segments=8.0,
+                                            fleet_counts_for_outliers=counts))
+        cal.set_fleet(_fleet_stats())
+        before = cal.errors.scale
+        used = cal.add(_aisle_segment(1.0, 0.08))  # type: ignore[arg-type]
+        assert used is not counts
+        assert (cal.errors.scale == before) is counts
+    ok = Calibration(CalibrationParams(fleet_prior_segments=8.0, fleet_counts_for_outliers=True))
+    ok.set_fleet(_fleet_stats())
+    assert ok.add(_aisle_segment(1.0, 0.005))  # type: ignore[arg-type]
+
+
+def test_the_calibrations_aisle_settings_are_the_agent_config() -> None:
+    params = registration_params(AgentConfig(
+        odom_calibration_max_segment_m=3.0, odom_calibration_slide_per_m=0.01,
+        odom_calibration_fleet_outliers=True)).calibration
+    assert params is not None
+    assert (params.max_segment_m, params.slide_per_m, params.fleet_counts_for_outliers) == (
+        3.0, 0.01, True)
