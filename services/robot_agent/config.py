@@ -205,16 +205,6 @@ class AgentConfig(BaseModel):
         "learned by the calibration, what is left is a fraction of it)")
     odom_calibration_segment_m: float = Field(
         default=1.0, gt=0, description="a calibration segment closes after this much driving")
-    odom_calibration_max_segment_m: float = Field(
-        default=5.0, gt=0, description="a longer segment (no good registration for that long) "
-        "is left out")
-    odom_calibration_slide_per_m: float = Field(
-        default=0.0, ge=0, description="a calibration segment's registered chord may be off by "
-        "this per metre driven (the map at its end was built during it; along an aisle the "
-        "registration slides with the odometry), so long segments weigh less")
-    odom_calibration_fleet_outliers: bool = Field(
-        default=False, description="a robot's first calibration segments are tested for "
-        "outliers against the teammates' pooled fit (it counts as fleet_prior_segments)")
     reg_align_max_range_m: float = Field(
         default=0.0, ge=0, description="register a frame with its points within this range "
         "only (m; 0 = all); it joins the map whole")

@@ -53,15 +53,8 @@ class CalibrationParams:
     reg_sigma_rad: float = 0.004
     walk_m2_per_m: float = 0.01**2
     walk_rad2_per_rad: float = 0.01**2
-    # a registration ending a segment sits on map that was built during the segment, from
-    # poses that drifted with the odometry (along an aisle the registration slides with
-    # them): its chord errs by this much per metre driven, on top of reg_sigma_m
-    slide_per_m: float = 0.0
     outlier_sigmas: float = 4.0  # residuals beyond this many σ of the model are left out
     min_segments_for_outliers: int = 5
-    # the teammates' pooled fit (fleet_prior_segments) counts toward those segments, so
-    # that a robot's first segments are tested against the fleet's wheels
-    fleet_counts_for_outliers: bool = False
     max_abs_scale: float = 0.1  # estimates are clamped to plausible wheels
     max_abs_bias_rad_per_m: float = 0.05
     # a good registration (a segment's end): matched this share of its points, and its
@@ -89,12 +82,6 @@ def is_good_registration(inlier_frac: float, R: np.ndarray, params: CalibrationP
     ground or of one wall slide along what they cannot see."""
     w = np.linalg.eigvalsh(0.5 * (R[:2, :2] + R[:2, :2].T))
     return inlier_frac >= params.min_inlier_frac and w[1] <= params.max_weak_ratio * w[0]
-
-
-def translation_variance(params: CalibrationParams, driven_m: float) -> float:
-    """Variance of a segment's odometry-minus-registration chord (m²)."""
-    return (2 * params.reg_sigma_m**2 + params.walk_m2_per_m * driven_m
-            + (params.slide_per_m * driven_m)**2)
 
 
 def signed_distance(increment: np.ndarray) -> float:
@@ -175,16 +162,13 @@ class Calibration:
         p = self.params
         if seg.driven_m > p.max_segment_m:
             return False
-        var_t = translation_variance(p, seg.driven_m)
+        var_t = 2 * p.reg_sigma_m**2 + p.walk_m2_per_m * seg.driven_m
         var_r = 2 * p.reg_sigma_rad**2 + p.walk_rad2_per_rad * seg.turned_rad
         e = self.errors
         r_t = seg.odom_chord_m - (1 + e.scale) * seg.reg_chord_m
         r_r = seg.odom_turn_rad - (1 + e.turn_scale) * seg.reg_turn_rad \
             - e.heading_bias_rad_per_m * seg.signed_distance_m
-        informed = self.n_used
-        if p.fleet_counts_for_outliers and p.fleet_prior_segments > 0 and self._fleet.any():
-            informed += p.fleet_prior_segments
-        if informed >= p.min_segments_for_outliers and (
+        if self.n_used >= p.min_segments_for_outliers and (
                 r_t**2 > p.outlier_sigmas**2 * var_t or r_r**2 > p.outlier_sigmas**2 * var_r):
             self.n_rejected += 1
             return False
@@ -212,7 +196,7 @@ class Calibration:
         `prior_segments` + `centre_segments` unit segments (1 m, 1 rad) at the nominal noise,
         centred on "no error" or on `centre` (scale, turn scale, heading bias)."""
         p = self.params
-        var_t = translation_variance(p, 1.0)
+        var_t = 2 * p.reg_sigma_m**2 + p.walk_m2_per_m
         var_r = 2 * p.reg_sigma_rad**2 + p.walk_rad2_per_rad
         n = p.prior_segments + centre_segments
         c = np.zeros(3) if centre is None else n * centre

@@ -41,10 +41,6 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
                             q_rad2_per_m=cfg.odom_heading_sigma_per_sqrt_m**2)
         if cfg.reg_fusion == "filter" else None,
         calibration=CalibrationParams(segment_m=cfg.odom_calibration_segment_m,
-                                      max_segment_m=cfg.odom_calibration_max_segment_m,
-                                      slide_per_m=cfg.odom_calibration_slide_per_m,
-                                      fleet_counts_for_outliers=(
-                                          cfg.odom_calibration_fleet_outliers),
                                       max_weak_ratio=cfg.odom_calibration_max_weak_ratio,
                                       prior_segments=cfg.odom_calibration_prior_segments,
                                       fleet_weight=cfg.odom_calibration_fleet_weight,
