@@ -175,8 +175,9 @@ class EdgeConfig(BaseModel):
     seed: int = Field(default=0, description="mission seed (RRT sampling)")
     # map merger
     merge: bool = Field(default=False, description="pose graph + registration corrections "
-                        "(off by default: with its registration gates it lowers the ATE "
-                        "everywhere but costs 3-9x the edge's CPU, docs/edge.md)")
+                        "(off by default: with its registration gates and precheck it lowers "
+                        "the ATE everywhere, but not the warehouse's ghosts, for 2-3x the "
+                        "edge's CPU; docs/edge.md)")
     max_registrations: int = Field(default=1, ge=0, description="pair registrations per plan")
     merge_registrations_per_robot: float = Field(
         default=0.0, ge=0, description="... or this many per robot with submaps, where that is "
