@@ -194,3 +194,17 @@ def test_the_precheck_sets_aside_pairs_without_costing_registrations() -> None:
     usual = MapMerger(V, MergerParams(max_registrations=1, precheck_m=0.25))
     usual.update(store)  # a pair at the truth shares its surfaces and is registered
     assert sum(edge is not None for edge in usual.registrations.values()) == 1
+
+
+def test_a_bounded_cache_of_prepared_clouds_changes_no_result() -> None:
+    drift = T_from_xyyaw(0.05, -0.03, 0.02)
+    results = []
+    for cap in (256, 2):
+        store, _ = build_store(drift)
+        merger = MapMerger(V, MergerParams(max_registrations=2, max_prepared=cap))
+        changed = run_merger(store, merger, updates=6)
+        assert len(merger._prepared) <= cap
+        results.append(changed)
+    assert results[0].keys() == results[1].keys() and results[0]
+    for key, T in results[0].items():
+        assert np.allclose(T, results[1][key])

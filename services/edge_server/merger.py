@@ -18,6 +18,7 @@ graph changed and holds at least one registration edge; until then placements fo
 from __future__ import annotations
 
 import logging
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -65,6 +66,10 @@ class MergerParams:
     precheck_m: float = 0.0  # > 0: a source point within this of a target point counts ...
     precheck_frac: float = 0.4  # ... and a pair whose share is below this is not registered
     max_prechecks: int = 64  # pairs asked per update at most
+    # prepared clouds (covariances, KD-trees) kept for this many submaps, least recently used
+    # dropped: a 24-robot warehouse mission at 300 s holds thousands of submaps, and an edge
+    # that kept them all was killed for memory
+    max_prepared: int = 256
     correction_tol_m: float = 0.01
     correction_tol_rad: float = 0.004
     registration: RegistrationParams = field(
@@ -117,8 +122,8 @@ class MapMerger:
         self.registrations: dict[tuple[SubmapKey, SubmapKey], Between | None] = {}
         self.estimates: dict[SubmapKey, np.ndarray] = {}
         self.inliers: dict[tuple[SubmapKey, SubmapKey], bool] = {}
-        self._points: dict[SubmapKey, tuple[int, np.ndarray, np.ndarray]] = {}  # n, points, box
-        self._prepared: dict[SubmapKey, tuple[int, Prepared]] = {}
+        self._boxes: dict[SubmapKey, tuple[int, np.ndarray]] = {}  # n, submap-frame box
+        self._prepared: OrderedDict[SubmapKey, tuple[int, Prepared]] = OrderedDict()
         self._epochs: dict[int, set[int]] = {}
         self._dirty = False
 
@@ -154,22 +159,19 @@ class MapMerger:
         sigma_yaw = p.odometry_sigma_rad + p.odometry_sigma_rad_per_rad * turned
         return info_diag([0.01, 0.01, sigma_yaw], [sigma_xy, sigma_xy, 0.01])
 
-    def _cached(self, sm: StoredSubmap) -> tuple[int, np.ndarray, np.ndarray]:
-        cached = self._points.get(sm.key)
+    def _box_of(self, sm: StoredSubmap) -> np.ndarray:
+        """(2, 3) submap-frame bounding box of the agents' voxel means, kept per submap size."""
+        cached = self._boxes.get(sm.key)
         if cached is None or cached[0] != sm.keys.size:
-            points = sm.points.astype(np.float64)  # the agents' voxel means
-            cached = (sm.keys.size, points, np.stack(column_extremes(points)))
-            self._points[sm.key] = cached
-        return cached
-
-    def _points_of(self, sm: StoredSubmap) -> np.ndarray:
-        return self._cached(sm)[1]
+            cached = (sm.keys.size, np.stack(column_extremes(sm.points.astype(np.float64))))
+            self._boxes[sm.key] = cached
+        return cached[1]
 
     def _candidates(self, closed: list[StoredSubmap]) -> list[tuple[StoredSubmap, StoredSubmap]]:
         """Untried pairs of closed submaps of different robots, largest box overlap first."""
         if len(closed) < 2:
             return []
-        boxes = np.stack([world_box(self._cached(sm)[2], self.estimates[sm.key]) for sm in closed])
+        boxes = np.stack([world_box(self._box_of(sm), self.estimates[sm.key]) for sm in closed])
         side = (np.minimum(boxes[:, None, 1], boxes[None, :, 1])
                 - np.maximum(boxes[:, None, 0], boxes[None, :, 0]))
         overlap = np.prod(np.maximum(side, 0.0), axis=2)  # (n, n) box overlap volumes
@@ -184,8 +186,12 @@ class MapMerger:
         """Downsampled cloud + covariances + KD-tree, built once per submap size."""
         cached = self._prepared.get(sm.key)
         if cached is None or cached[0] != sm.keys.size:
-            cached = (sm.keys.size, prepare(self._points_of(sm), self.params.registration))
+            points = sm.points.astype(np.float64)  # the agents' voxel means
+            cached = (sm.keys.size, prepare(points, self.params.registration))
             self._prepared[sm.key] = cached
+            while len(self._prepared) > self.params.max_prepared:
+                self._prepared.popitem(last=False)
+        self._prepared.move_to_end(sm.key)
         return cached[1]
 
     def _near_share(self, target: StoredSubmap, source: StoredSubmap) -> float:
