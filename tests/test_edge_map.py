@@ -9,7 +9,7 @@ from services.common.geometry import T_from_xyyaw, transform_points
 from services.common.voxels import centres, unpack
 from services.edge_server.config import EdgeConfig
 from services.edge_server.merged_grid import FREE, OCCUPIED, UNKNOWN, MergedGrid
-from services.edge_server.merged_map import MergedMap
+from services.edge_server.merged_map import MergedMap, _first_observed
 from services.edge_server.submap_store import SubmapStore
 
 V = 0.05
@@ -275,3 +275,17 @@ def test_grid_free_cells_cached_union_equals_from_scratch() -> None:
     send(0, 3, len(steps))  # the stable set gains a submap: drawn in, not redrawn
     assert same_drawing()
     assert len(grid._stable[0]) == 4  # all but each robot's newest
+
+
+def test_first_observer_is_the_earliest_tick_then_robot_then_entry() -> None:
+    rng = np.random.default_rng(5)
+    for n in (0, 1, 7, 5000):
+        keys = rng.integers(0, max(n // 3, 1), n).astype(np.int64) * 7919  # many repeats
+        ticks = rng.integers(0, 4, n).astype(np.int32)  # ... and ties on (tick, robot)
+        robots = rng.integers(0, 3, n).astype(np.uint8)
+        uniq, idx = _first_observed(keys, ticks, robots)
+        order = np.lexsort((np.arange(n), robots, ticks, keys))  # the rule, spelled out
+        first = np.ones(n, bool)
+        first[1:] = keys[order][1:] != keys[order][:-1]
+        assert np.array_equal(uniq, keys[order][first])
+        assert np.array_equal(idx, order[first])

@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from services.common.geometry import T_from_xyyaw, invert
 from services.common.registration import (
     RegistrationParams,
+    overlapping_pairs,
     planar_condition,
     prepare,
     register,
+    world_box,
+    world_boxes,
 )
 from services.config import load_config
 from services.edge_server.merger import merger_params
@@ -83,3 +87,36 @@ def test_the_edge_config_sets_the_merger_gates_and_zero_turns_them_off() -> None
     assert (on.max_mean_error, on.max_planar_condition, on.max_shift_m) == (0.015, 20.0, 0.25)
     scaled = merger_params(load_config(None, {"edge.merge_registrations_per_robot": "0.34"}).edge)
     assert scaled.registrations_per_robot == 0.34
+
+
+def _brute_pairs(boxes: np.ndarray, min_volume: float) -> list[tuple[int, int, float]]:
+    side = (np.minimum(boxes[:, None, 1], boxes[None, :, 1])
+            - np.maximum(boxes[:, None, 0], boxes[None, :, 0]))
+    volume = np.prod(np.maximum(side, 0.0), axis=2)
+    rows, cols = np.nonzero(np.triu(volume >= min_volume, 1))
+    return sorted(zip(rows.tolist(), cols.tolist(), volume[rows, cols].tolist(), strict=True))
+
+
+def test_the_sweep_finds_every_overlapping_pair_the_full_table_does() -> None:
+    rng = np.random.default_rng(3)
+    for n in (0, 1, 2, 40, 400):
+        lo = rng.uniform(-15, 15, (n, 3)) * [1, 1, 0.1]  # flat like a floor's submaps
+        boxes = np.stack([lo, lo + rng.uniform(0.2, 6, (n, 3))], 1)
+        boxes[: n // 4, 0, 0] = np.round(boxes[: n // 4, 0, 0])  # ties in the sweep order
+        i, j, v = overlapping_pairs(boxes, 0.5)
+        assert sorted(zip(i.tolist(), j.tolist(), v.tolist(), strict=True)) == _brute_pairs(
+            boxes, 0.5)
+    with pytest.raises(ValueError):
+        overlapping_pairs(np.zeros((2, 2, 3)), 0.0)
+
+
+def test_world_boxes_of_many_equal_each_box_moved_alone() -> None:
+    rng = np.random.default_rng(4)
+    boxes = np.sort(rng.uniform(-2, 2, (30, 2, 3)), axis=1)
+    poses = np.stack([T_from_xyyaw(*rng.uniform(-5, 5, 2), rng.uniform(-3, 3)) for _ in range(30)])
+    many = world_boxes(boxes, poses)
+    for box, T, got in zip(boxes, poses, many, strict=True):
+        corners = np.array([[x, y, z] for x in box[:, 0] for y in box[:, 1] for z in box[:, 2]])
+        moved = corners @ T[:3, :3].T + T[:3, 3]
+        assert np.allclose(got, [moved.min(0), moved.max(0)], atol=1e-12)
+        assert np.array_equal(world_box(box, T), got)

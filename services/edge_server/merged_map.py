@@ -69,12 +69,21 @@ def _to_world_keys(sm: StoredSubmap, start: int, voxel_m: float) -> np.ndarray:
 def _first_observed(
     keys: np.ndarray, ticks: np.ndarray, robots: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Sorted unique keys and, per key, the index of its earliest (tick, robot) entry."""
-    order = np.lexsort((robots, ticks, keys))
+    """Sorted unique keys and, per key, the index of its earliest (tick, robot) entry (the
+    first such entry on a tie). One unstable sort by key and a pass over the keys seen
+    more than once: a three-key lexsort of a warehouse's millions of entries took 2-3× as
+    long, on every rebuild."""
+    order = np.argsort(keys)
     sorted_keys = keys[order]
     first = np.ones(sorted_keys.size, bool)
     first[1:] = sorted_keys[1:] != sorted_keys[:-1]
-    return sorted_keys[first], order[first]
+    start = np.flatnonzero(first)
+    if start.size == sorted_keys.size:
+        return sorted_keys, order
+    rank = ticks[order].astype(np.int64) * 256 + robots[order]  # robots: uint8
+    size = np.diff(np.append(start, sorted_keys.size))
+    earliest = np.repeat(np.minimum.reduceat(rank, start), size) == rank
+    return sorted_keys[start], np.minimum.reduceat(np.where(earliest, order, keys.size), start)
 
 
 @dataclass

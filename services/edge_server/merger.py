@@ -30,9 +30,10 @@ from services.common.pose_graph import Between, Prior, info_diag, optimize
 from services.common.registration import (
     Prepared,
     RegistrationParams,
+    overlapping_pairs,
     prepare,
     register,
-    world_box,
+    world_boxes,
 )
 from services.edge_server.config import EdgeConfig
 from services.edge_server.consistency import ConsistencyParams, select
@@ -167,20 +168,26 @@ class MapMerger:
             self._boxes[sm.key] = cached
         return cached[1]
 
-    def _candidates(self, closed: list[StoredSubmap]) -> list[tuple[StoredSubmap, StoredSubmap]]:
-        """Untried pairs of closed submaps of different robots, largest box overlap first."""
-        if len(closed) < 2:
+    def _candidates(self, closed: list[StoredSubmap], limit: int
+                    ) -> list[tuple[StoredSubmap, StoredSubmap]]:
+        """The first `limit` untried pairs of closed submaps of different robots, largest box
+        overlap first."""
+        if len(closed) < 2 or limit <= 0:
             return []
-        boxes = np.stack([world_box(self._box_of(sm), self.estimates[sm.key]) for sm in closed])
-        side = (np.minimum(boxes[:, None, 1], boxes[None, :, 1])
-                - np.maximum(boxes[:, None, 0], boxes[None, :, 0]))
-        overlap = np.prod(np.maximum(side, 0.0), axis=2)  # (n, n) box overlap volumes
+        boxes = world_boxes(np.stack([self._box_of(sm) for sm in closed]),
+                            np.stack([self.estimates[sm.key] for sm in closed]))
+        rows, cols, overlap = overlapping_pairs(boxes, self.params.min_overlap_m3)
         robots = np.array([sm.robot_id for sm in closed])
-        ok = np.triu(overlap >= self.params.min_overlap_m3, 1) & (robots[:, None] != robots)
-        rows, cols = np.nonzero(ok)
-        order = np.lexsort((cols, rows, -overlap[rows, cols]))  # largest first, then by index
-        pairs = [(closed[i], closed[j]) for i, j in zip(rows[order], cols[order], strict=True)]
-        return [(a, b) for a, b in pairs if (a.key, b.key) not in self.registrations]
+        other = robots[rows] != robots[cols]
+        rows, cols, overlap = rows[other], cols[other], overlap[other]
+        pairs = []
+        for k in np.lexsort((cols, rows, -overlap)):  # largest first, then by index
+            a, b = closed[rows[k]], closed[cols[k]]
+            if (a.key, b.key) not in self.registrations:
+                pairs.append((a, b))
+                if len(pairs) == limit:
+                    break
+        return pairs
 
     def _prepared_of(self, sm: StoredSubmap) -> Prepared:
         """Downsampled cloud + covariances + KD-tree, built once per submap size."""
@@ -217,7 +224,7 @@ class MapMerger:
         if self.params.precheck_m <= 0:
             return pairs[:budget]
         chosen = []
-        for target, source in pairs[: self.params.max_prechecks]:
+        for target, source in pairs:
             if len(chosen) == budget:
                 break
             if self._near_share(target, source) >= self.params.precheck_frac:
@@ -260,7 +267,8 @@ class MapMerger:
                     self._add_node(sm, sms[i - 1] if i else None)
             closed += [sm for sm in sms[:-1] if sm.keys.size >= self.params.min_points]
         budget = self.registration_budget(len(by_robot))
-        for target, source in self._worth_registering(self._candidates(closed), budget):
+        asked = budget if self.params.precheck_m <= 0 else self.params.max_prechecks
+        for target, source in self._worth_registering(self._candidates(closed, asked), budget):
             self._register(target, source)
         edges = [e for e in self.registrations.values() if e is not None]
         if not self._dirty or not edges:
