@@ -3,8 +3,8 @@ writes them, for missions run one by one (`spacemap run ... --out DIR`).
 
     .venv/bin/python bench/bench_tables.py OUT_DIR RUN_DIR [RUN_DIR ...]
 
-A run's method is its planner (`standalone` when it ran without the DRF, `space-merger` with
-the map merger on: `tables.method_name`), its world and
+A run's method is its planner (`standalone` when it ran without the DRF, `space-no-merger`
+with the map merger off: `tables.method_name`), its world and
 robot count come from its metrics.json; Fig. 5 needs runs with a time series
 (`--sample-every` > 0). Folders without metrics.json are listed and left out; other paths
 (logs beside the runs) are ignored.

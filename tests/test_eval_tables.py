@@ -54,23 +54,24 @@ def test_bv_ratio_reports_standalone_over_space() -> None:
     assert "300.0×" in line
 
 
-def test_table1_sets_the_merger_beside_space() -> None:
-    recs = _records() + [{**r, "method": "space-merger", "mapping_time_s": 100.0}
+def test_table1_sets_the_merger_off_beside_space() -> None:
+    recs = _records() + [{**r, "method": "space-no-merger", "mapping_time_s": 100.0}
                          for r in _records() if r["method"] == "space"]
     md = tb.table_markdown(recs, tb.TABLE1_METHODS, tb.TABLE1_METRICS, "Table I")
-    assert "| metric | standalone | space | space-merger |" in md
-    assert "| mapping time (s) | n/a | n/a | 100.0 ± 0.0 |" in md
+    assert "| metric | standalone | space-no-merger | space |" in md
+    assert "| mapping time (s) | n/a | 100.0 ± 0.0 | n/a |" in md
 
 
 def test_bench_methods_set_the_merger_only_where_named() -> None:
     base = SpacemapConfig()
-    assert base.edge.merge is False
-    merged = mission_config(base, "house", 3, "space-merger", 1, 60.0)
-    assert (merged.edge.merge, merged.edge.planner, merged.agent.drf) == (True, "space", True)
-    assert mission_config(base, "house", 3, "space", 1, 60.0).edge.merge is False
-    on = SpacemapConfig.model_validate({"edge": {"merge": True}})
+    assert base.edge.merge is True
+    off = mission_config(base, "house", 3, "space-no-merger", 1, 60.0)
+    assert (off.edge.merge, off.edge.planner, off.agent.drf) == (False, "space", True)
+    assert mission_config(base, "house", 3, "space", 1, 60.0).edge.merge is True
+    no = SpacemapConfig.model_validate({"edge": {"merge": False}})
     for method in ("space", "standalone", "rrt"):  # the base config's choice stands
-        assert mission_config(on, "house", 3, method, 1, 60.0).edge.merge is True
+        assert mission_config(no, "house", 3, method, 1, 60.0).edge.merge is False
+    assert mission_config(no, "house", 3, "space-merger", 1, 60.0).edge.merge is True
     alone = mission_config(base, "bookstore", 6, "standalone", 2, 60.0)
     assert (alone.agent.drf, alone.sim.robots, alone.sim.seed) == (False, 6, 2)
 
@@ -95,8 +96,10 @@ def test_plots_are_written(tmp_path: Path) -> None:
 
 
 def test_a_run_folder_names_its_bench_method() -> None:
-    assert tb.method_name("space", True, True) == "space-merger"
+    assert tb.method_name("space", True, True) == "space"  # the merger is on by default
     assert tb.method_name("space", True) == "space"
+    assert tb.method_name("space", True, False) == "space-no-merger"
     assert tb.method_name("space", False) == "standalone"
+    assert tb.method_name("space", False, False) == "standalone"
     assert tb.method_name("rrt", True) == "rrt"
-    assert tb.method_name("rrt", True, True) == "rrt"  # no bench method: the planner's name
+    assert tb.method_name("rrt", True, False) == "rrt"  # no bench method: the planner's name

@@ -79,14 +79,17 @@ def test_the_shift_gate_rejects_a_registration_that_moves_the_estimate_too_far()
 
 
 def test_the_edge_config_sets_the_merger_gates_and_zero_turns_them_off() -> None:
-    off = merger_params(load_config(None, {}).edge).registration
+    default = merger_params(load_config(None, {}).edge)
+    gates = default.registration
+    assert (gates.max_mean_error, gates.max_planar_condition, gates.max_shift_m) == (
+        0.015, 20.0, 0.25)
+    assert (default.max_registrations, default.registrations_per_robot, default.precheck_m) == (
+        2, 0.34, 0.25)
+    off = merger_params(load_config(None, {"edge.merge_max_mean_error": "0",
+                                           "edge.merge_max_condition": "0"}).edge).registration
     assert off.max_mean_error == float("inf") and off.max_planar_condition == float("inf")
-    on = merger_params(load_config(None, {"edge.merge_max_mean_error": "0.015",
-                                          "edge.merge_max_condition": "20",
-                                          "edge.merge_max_shift_m": "0.25"}).edge).registration
-    assert (on.max_mean_error, on.max_planar_condition, on.max_shift_m) == (0.015, 20.0, 0.25)
-    scaled = merger_params(load_config(None, {"edge.merge_registrations_per_robot": "0.34"}).edge)
-    assert scaled.registrations_per_robot == 0.34
+    scaled = merger_params(load_config(None, {"edge.merge_registrations_per_robot": "0.5"}).edge)
+    assert scaled.registrations_per_robot == 0.5
 
 
 def _brute_pairs(boxes: np.ndarray, min_volume: float) -> list[tuple[int, int, float]]:

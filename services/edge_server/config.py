@@ -174,14 +174,15 @@ class EdgeConfig(BaseModel):
         "finding the last frontiers and ended house missions at 88-95 % 3D)")
     seed: int = Field(default=0, description="mission seed (RRT sampling)")
     # map merger
-    merge: bool = Field(default=False, description="pose graph + registration corrections "
-                        "(off by default: with its registration gates and precheck it lowers "
-                        "the ATE everywhere, but not the warehouse's ghosts, for 2-3x the "
-                        "edge's CPU; docs/edge.md)")
-    max_registrations: int = Field(default=1, ge=0, description="pair registrations per plan")
+    merge: bool = Field(default=True, description="pose graph + registration corrections "
+                        "(with its registration gates and precheck it lowers the ATE in every "
+                        "world and the warehouse's ghosts at 300 s, for 2-3x the edge's CPU; "
+                        "docs/edge.md)")
+    max_registrations: int = Field(default=2, ge=0, description="pair registrations per plan")
     merge_registrations_per_robot: float = Field(
-        default=0.0, ge=0, description="... or this many per robot with submaps, where that is "
-        "more (a large team needs more: docs/edge.md, \"Registrations the merger can trust\")")
+        default=0.34, ge=0, description="... or this many per robot with submaps, where that "
+        "is more (a large team needs more: 8 at 24 robots; docs/edge.md, \"Registrations the "
+        "merger can trust\")")
     merge_odometry_sigma_m: float = Field(
         default=0.01, gt=0, description="σ x, y of the odometry edge between consecutive submaps")
     merge_odometry_sigma_per_m: float = Field(
@@ -211,18 +212,18 @@ class EdgeConfig(BaseModel):
         default=0.05, gt=0, description="a registration edge's information is scaled to this "
         "mean translational σ (its shape is the registration's Hessian)")
     merge_precheck_m: float = Field(
-        default=0.0, ge=0, description="> 0: a candidate pair is registered only when this "
+        default=0.25, ge=0, description="> 0: a candidate pair is registered only when this "
         "share of the source's points lie within this of the target's at the current estimate "
         "(merge_precheck_frac); the others are set aside without costing a registration")
     merge_precheck_frac: float = Field(default=0.4, ge=0, le=1, description="... this share")
     merge_max_shift_m: float = Field(
-        default=0.5, gt=0, description="a registration that moves the pair's estimate further "
+        default=0.25, gt=0, description="a registration that moves the pair's estimate further "
         "is rejected (repeating shelves alias by their spacing, 40 cm in the bookstore)")
     merge_max_mean_error: float = Field(
-        default=0.0, ge=0, description="a registration whose GICP residual per inlier "
+        default=0.015, ge=0, description="a registration whose GICP residual per inlier "
         "is above this is rejected (0: no test)")
     merge_max_condition: float = Field(
-        default=0.0, ge=0, description="a registration whose planar translation "
+        default=20.0, ge=0, description="a registration whose planar translation "
         "information is this much weaker in one direction than the other is rejected (0: no "
         "test)")
     # assignment

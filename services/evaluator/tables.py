@@ -10,6 +10,10 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
+from services.edge_server.config import EdgeConfig
+
+MERGE_DEFAULT: bool = EdgeConfig.model_fields["merge"].default
+
 
 class Method(NamedTuple):
     """What a bench method sets in the mission config."""
@@ -22,20 +26,25 @@ class Method(NamedTuple):
 METHODS: dict[str, Method] = {
     "standalone": Method("space", False),
     "space": Method("space", True),
-    # the paper's coherent map merger (pose graph + LM) on: Table I's merger column
-    "space-merger": Method("space", True, merge=True),
+    # the paper's coherent map merger (pose graph + LM) off: Table I's column beside SPACE
+    "space-no-merger": Method("space", True, merge=False),
+    "space-merger": Method("space", True, merge=True),  # on whatever the base config says
     "space-paper": Method("space-paper", True),
     "nearest": Method("nearest", True),
     "utility": Method("utility", True),
     "rrt": Method("rrt", True),
 }
-TABLE1_METHODS = ("standalone", "space", "space-merger")
+TABLE1_METHODS = ("standalone", "space-no-merger", "space")
+# a bench's methods unless named: `space-merger` is `space` under the default config
+BENCH_METHODS = tuple(m for m in METHODS if m != "space-merger")
 
 
-def method_name(planner: str, drf: bool, merge: bool = False) -> str:
-    """The bench method a run's config amounts to (the planner's name when none fits)."""
+def method_name(planner: str, drf: bool, merge: bool = MERGE_DEFAULT) -> str:
+    """The bench method a run's config amounts to (the planner's name when none fits); a
+    method that leaves the merger to the base config names the runs with its default."""
     for name, how in METHODS.items():
-        if (how.planner, how.drf, bool(how.merge)) == (planner, drf, merge):
+        wants = MERGE_DEFAULT if how.merge is None else how.merge
+        if (how.planner, how.drf, wants) == (planner, drf, merge):
             return name
     return planner if drf else "standalone"
 

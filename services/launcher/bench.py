@@ -26,7 +26,7 @@ log = logging.getLogger(__name__)
 class BenchSpec:
     worlds: tuple[str, ...] = ("house",)
     robots: tuple[int, ...] = (3,)
-    methods: tuple[str, ...] = tuple(tb.METHODS)
+    methods: tuple[str, ...] = tb.BENCH_METHODS
     seeds: tuple[int, ...] = (0, 1)
     sim_time_s: float = 150.0
     sample_every_s: float = 5.0
