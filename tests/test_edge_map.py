@@ -289,3 +289,45 @@ def test_first_observer_is_the_earliest_tick_then_robot_then_entry() -> None:
         first[1:] = keys[order][1:] != keys[order][:-1]
         assert np.array_equal(uniq, keys[order][first])
         assert np.array_equal(idx, order[first])
+
+
+def test_merged_map_through_moves_equals_one_built_afresh() -> None:
+    """P* kept by deltas and re-judged from the sorted observations when submaps move equals
+    a map built from the store in one go: keys, first observers, colours, sources."""
+    rng = np.random.default_rng(1)
+    store, merged = SubmapStore(V), MergedMap(V)
+    seq = {0: 0, 1: 0, 2: 0}
+    moves = 0
+    for tick in range(1, 60):
+        for _ in range(4):
+            robot, sub = int(rng.integers(3)), int(rng.integers(4))
+            idx = rng.integers(0, 10, (int(rng.integers(1, 20)), 3))
+            pose = T_from_xyyaw(0.05 * sub, 0.05 * robot, 0.1 * sub)
+            store.apply(make_submap(robot, sub, seq[robot], tick, pose,  # ties within a tick
+                                    voxel_centres(idx), color=int(rng.integers(256))))
+            seq[robot] += 1
+        if rng.random() < 0.3:  # a merger correction moves one or two submaps
+            for key in rng.permutation(sorted(store.submaps))[: int(rng.integers(1, 3))]:
+                store.set_pose(tuple(key), T_from_xyyaw(*rng.uniform(-0.2, 0.2, 2),
+                                                        rng.uniform(-1, 1)))
+            moves += 1
+        merged.update(store)
+        fresh = MergedMap(V)
+        fresh.update(store)
+        for name in ("keys", "robot_ids", "src_idx"):
+            np.testing.assert_array_equal(getattr(merged, name), getattr(fresh, name), name)
+        # uids number parts in the order each map first saw them
+        assert sources(merged) == sources(fresh)
+        # a voxel's colour is its first observer's as the part took it (later deltas of a
+        # known voxel refresh the store's colour, not the part's)
+        parts = {p.uid: p for p in merged._parts.values()}
+        want = np.array([parts[u].colors[i] for u, i in zip(merged.src_uid, merged.src_idx,
+                                                            strict=True)]).reshape(-1, 3)
+        np.testing.assert_array_equal(merged.colors, want)
+    assert moves > 5 and len(merged) > 300
+
+
+def sources(merged: MergedMap) -> list[tuple[int, int, int]]:
+    key_of = {u: k for k, u in merged._uids.items()}
+    return [(*key_of[int(u)], int(i)) for u, i in zip(merged.src_uid, merged.src_idx,
+                                                       strict=True)]

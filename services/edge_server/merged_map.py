@@ -8,7 +8,9 @@ where the world voxel's centre would stair-step it by up to half a voxel; the ke
 grid and the frontiers, come from the centres. Updates are incremental
 while no pose changes: only voxels appended since the last update are transformed and merged
 (they arrived later, so they never displace an existing voxel's first observer). A pose change
-rebuilds that submap's world keys and the merged set.
+rebuilds that submap's world keys and judges every voxel's first observer again, from all
+submaps' observations kept sorted by key (observations.py: the moved submaps' rows are
+replaced, the rest are not sorted again).
 
 Each robot's own map (`robot_cloud`, the live evaluator's overlap asks for it every few sim
 seconds, under the edge's lock) is kept the same way: per robot, the voxels of the parts it was
@@ -30,6 +32,7 @@ import numpy as np
 from services.common.arrays import insert_rows
 from services.common.geometry import transform_points
 from services.common.voxels import centres, pack, unpack, voxel_indices
+from services.edge_server.observations import ObservationTable
 from services.edge_server.submap_store import StoredSubmap, SubmapKey, SubmapStore
 
 
@@ -139,6 +142,7 @@ class MergedMap:
         # keys the last update inserted; None after a rebuild (voxels may have been removed)
         self.added_keys: np.ndarray | None = np.zeros(0, np.int64)
         self._robot_maps: dict[int, _RobotMap] = {}
+        self._observations = ObservationTable()  # every part's voxels, sorted by key
 
     # -- update ----------------------------------------------------------------------------
     def update(self, store: SubmapStore) -> bool:
@@ -146,12 +150,13 @@ class MergedMap:
         if store.version == self._store_version:
             return False
         self._store_version = store.version
-        rebuild = False
+        moved: set[int] = set()
         deltas: list[tuple[np.ndarray, ...]] = []
         for sm in store.ordered():
             part = self._parts.get(sm.key)
             if part is None or part.pose_version != sm.pose_version:
-                rebuild |= part is not None
+                if part is not None:
+                    moved.add(part.uid)
                 uid = self._uids.setdefault(sm.key, len(self._uids))
                 part = _WorldPart(sm.pose_version, 0, np.zeros(0, np.int64),
                                   np.zeros((0, 3), np.uint8), np.zeros(0, np.int64), uid)
@@ -167,12 +172,15 @@ class MergedMap:
                 part.colors = np.concatenate([part.colors, new_colors])
                 part.first_tick = np.concatenate([part.first_tick, new_ticks])
                 part.n = sm.keys.size
+        self._observations.drop(moved)
+        for new_keys, _, new_ticks, robots, uids, idx in deltas:
+            self._observations.add(new_keys, new_ticks, robots, uids, idx)
         v = self.cloud_version + 1
         if self._snapshot_points(store, v):
             self._points = None
             self.cloud_version = v
-        if rebuild:
-            self._rebuild(store)
+        if moved:
+            self._rebuild()
             self.added_keys = None
             self.added_at = np.full(self.keys.size, v, np.int32)
             self.rebuilt_at = v
@@ -211,20 +219,20 @@ class MergedMap:
         self._points_version += taken
         return taken
 
-    def _rebuild(self, store: SubmapStore) -> None:
-        sms = store.ordered()
-        parts = [self._parts[sm.key] for sm in sms]
-        keys = np.concatenate([p.keys_world for p in parts])
-        ticks = np.concatenate([p.first_tick for p in parts])
-        colors = np.concatenate([p.colors for p in parts])
-        robots = np.concatenate([
-            np.full(p.keys_world.size, sm.robot_id, np.uint8)
-            for sm, p in zip(sms, parts, strict=True)
-        ])
-        uids, src = _sources(parts)
-        self.keys, idx = _first_observed(keys, ticks, robots)
-        self.colors, self.robot_ids = colors[idx], robots[idx]
-        self.src_uid, self.src_idx = uids[idx], src[idx]
+    def _rebuild(self) -> None:
+        """Every voxel's first observer again, from the observations kept sorted."""
+        by_uid = sorted(self._parts.values(), key=lambda p: p.uid)
+        submap_of_uid = np.array([0] * len(self._uids), np.int64)
+        for key, uid in self._uids.items():
+            submap_of_uid[uid] = key[1]
+        self.keys, rows = self._observations.first_observers(submap_of_uid)
+        obs = self._observations
+        self.robot_ids = (obs.rank[rows] & 255).astype(np.uint8)
+        self.src_uid, self.src_idx = obs.uid[rows], obs.idx[rows]
+        offsets = np.cumsum([0] + [p.colors.shape[0] for p in by_uid])[:-1]
+        colors = np.concatenate([p.colors for p in by_uid]) if by_uid else np.zeros((0, 3),
+                                                                                  np.uint8)
+        self.colors = colors[offsets[self.src_uid] + self.src_idx]
 
     def _merge_delta(
         self, keys: np.ndarray, colors: np.ndarray, ticks: np.ndarray, robots: np.ndarray,
