@@ -6,7 +6,12 @@ import numpy as np
 
 from services.common.geometry import T_from_xyyaw, invert
 from services.common.pose_graph import Between, info_diag
-from services.edge_server.consistency import ConsistencyParams, max_clique, select
+from services.edge_server.consistency import (
+    ConsistencyMemo,
+    ConsistencyParams,
+    max_clique,
+    select,
+)
 from services.edge_server.merger import MapMerger, pose_change
 from tests.test_edge_merger import LOOSE, V, build_store
 
@@ -74,3 +79,20 @@ def test_merger_rejects_an_injected_false_closure() -> None:
     assert sum(merger.inliers[(e.a, e.b)] for e in good) >= 3
     for key in [(1, 1), (1, 2), (1, 3)]:
         assert pose_change(merger.estimates[key], truth[key])[0] < 0.03
+
+
+def test_a_memo_gives_the_same_answers_and_sees_a_chain_pose_change() -> None:
+    truth, reported, robot_of = _scene()
+    edges = [_edge(truth, (0, k), (1, k)) for k in range(3)]
+    edges.append(_edge(truth, (0, 3), (1, 3), T_from_xyyaw(0.4, 0.2, 0.15)))
+    memo = ConsistencyMemo()
+    for n in range(2, len(edges) + 1):  # one more edge per update, as the merger asks
+        assert select(edges[:n], reported, robot_of, PARAMS, memo) == select(
+            edges[:n], reported, robot_of, PARAMS)
+    assert len(memo.tests) == 6
+    # robot 1 re-reports its last submap where the "wrong" edge puts it: the memo re-tests
+    moved = dict(reported)
+    moved[(1, 3)] = reported[(1, 3)] @ T_from_xyyaw(0.4, 0.2, 0.15)
+    want = select(edges, moved, robot_of, PARAMS)
+    assert select(edges, moved, robot_of, PARAMS, memo) == want
+    assert want != select(edges, reported, robot_of, PARAMS)

@@ -14,7 +14,7 @@ Pure: poses and edges in, the kept edges out.
 from __future__ import annotations
 
 from collections.abc import Hashable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from gtsam import Pose3
@@ -87,9 +87,47 @@ def oriented(edge: Between, robot_of: Mapping[Hashable, tuple[int, int]]) -> Bet
     return Between(edge.b, edge.a, invert(edge.T_a_b), edge.info, edge.robust)
 
 
+@dataclass
+class ConsistencyMemo:
+    """Pair tests already made, reused while the four chain poses each one read are
+    unchanged: the merger asks PCM again at every update with one or two new edges, and the
+    old pairs' tests were most of its cost (66 000 in an AWS house mission)."""
+
+    poses: dict[Hashable, tuple[np.ndarray, int]] = field(default_factory=dict)  # T, stamp
+    tests: dict[tuple, tuple[tuple[int, ...], bool]] = field(default_factory=dict)
+
+    def stamps(self, chain: Mapping[Hashable, np.ndarray]) -> dict[Hashable, int]:
+        """Per submap, a number that changes whenever its chain pose does."""
+        out = {}
+        for key, T in chain.items():
+            held = self.poses.get(key)
+            if held is None or not np.array_equal(held[0], T):
+                held = (np.array(T, copy=True), held[1] + 1 if held else 0)
+                self.poses[key] = held
+            out[key] = held[1]
+        return out
+
+
+def _test(e1: Between, e2: Between, chain: Mapping[Hashable, np.ndarray],
+          params: ConsistencyParams, memo: ConsistencyMemo | None,
+          stamps: Mapping[Hashable, int]) -> bool:
+    if memo is None:
+        return consistent(e1, e2, chain, params)
+    pair = ((e1.a, e1.b), (e2.a, e2.b))
+    now = (stamps[e1.a], stamps[e1.b], stamps[e2.a], stamps[e2.b])
+    held = memo.tests.get(pair)
+    if held is None or held[0] != now:
+        held = (now, consistent(e1, e2, chain, params))
+        memo.tests[pair] = held
+    return held[1]
+
+
 def select(edges: Sequence[Between], chain: Mapping[Hashable, np.ndarray],
-           robot_of: Mapping[Hashable, tuple[int, int]], params: ConsistencyParams) -> list[bool]:
-    """Per edge (input order): kept by PCM."""
+           robot_of: Mapping[Hashable, tuple[int, int]], params: ConsistencyParams,
+           memo: ConsistencyMemo | None = None) -> list[bool]:
+    """Per edge (input order): kept by PCM. With a memo, pair tests made before with the
+    same chain poses are not made again (the same answers)."""
+    stamps = memo.stamps(chain) if memo is not None else {}
     groups: dict[tuple, list[int]] = {}
     for i, e in enumerate(edges):
         pair = tuple(sorted((robot_of[e.a], robot_of[e.b])))
@@ -101,7 +139,8 @@ def select(edges: Sequence[Between], chain: Mapping[Hashable, np.ndarray],
         adjacent = np.zeros((n, n), bool)
         for i in range(n):
             for j in range(i + 1, n):
-                adjacent[i, j] = adjacent[j, i] = consistent(es[i], es[j], chain, params)
+                adjacent[i, j] = adjacent[j, i] = _test(es[i], es[j], chain, params, memo,
+                                                        stamps)
         clique = max_clique(adjacent)
         if len(clique) >= params.min_clique:
             for c in clique:

@@ -36,7 +36,7 @@ from services.common.registration import (
     world_boxes,
 )
 from services.edge_server.config import EdgeConfig
-from services.edge_server.consistency import ConsistencyParams, select
+from services.edge_server.consistency import ConsistencyMemo, ConsistencyParams, select
 from services.edge_server.submap_store import StoredSubmap, SubmapKey, SubmapStore
 
 log = logging.getLogger(__name__)
@@ -124,6 +124,8 @@ class MapMerger:
         self.estimates: dict[SubmapKey, np.ndarray] = {}
         self.inliers: dict[tuple[SubmapKey, SubmapKey], bool] = {}
         self._boxes: dict[SubmapKey, tuple[int, np.ndarray]] = {}  # n, submap-frame box
+        self._fine_boxes: dict[SubmapKey, tuple[int, np.ndarray]] = {}  # ... of fine points
+        self._pcm_memo = ConsistencyMemo()
         self._prepared: OrderedDict[SubmapKey, tuple[int, Prepared]] = OrderedDict()
         self._epochs: dict[int, set[int]] = {}
         self._dirty = False
@@ -201,14 +203,33 @@ class MapMerger:
         self._prepared.move_to_end(sm.key)
         return cached[1]
 
-    def _near_share(self, target: StoredSubmap, source: StoredSubmap) -> float:
-        """Share of the source's fine points within `precheck_m` of a target point, at the
-        current estimates."""
+    def _near_enough(self, target: StoredSubmap, source: StoredSubmap) -> bool:
+        """Whether at least `precheck_frac` of the source's fine points lie within
+        `precheck_m` of a target point, at the current estimates. Only the points inside the
+        target's fine box grown by that much are searched: the others cannot be near, and
+        most box-overlapping pairs are decided by that count alone."""
         tgt, src = self._prepared_of(target), self._prepared_of(source)
         T = invert(self.estimates[target.key]) @ self.estimates[source.key]
         points = np.asarray(src.fine[0].points())[:, :3] @ T[:3, :3].T + T[:3, 3]
-        _, d2 = tgt.fine[1].batch_nearest_neighbor_search(points, num_threads=1)
-        return float(np.mean(np.asarray(d2) < self.params.precheck_m**2)) if len(points) else 0.0
+        if not len(points):
+            return self.params.precheck_frac <= 0.0
+        margin = self.params.precheck_m + 1e-6  # beyond it no rounding makes a point near
+        lo, hi = self._fine_box(target)
+        inside = np.all((points >= lo - margin) & (points <= hi + margin), axis=1)
+        if int(np.count_nonzero(inside)) / len(points) < self.params.precheck_frac:
+            return False  # the same test as below, on a count at least as large
+        _, d2 = tgt.fine[1].batch_nearest_neighbor_search(points[inside], num_threads=1)
+        near = int(np.count_nonzero(np.asarray(d2) < self.params.precheck_m**2))
+        return near / len(points) >= self.params.precheck_frac
+
+    def _fine_box(self, sm: StoredSubmap) -> np.ndarray:
+        """(2, 3) box of the submap's fine registration points (its own frame)."""
+        cached = self._fine_boxes.get(sm.key)
+        if cached is None or cached[0] != sm.keys.size:
+            fine = np.asarray(self._prepared_of(sm).fine[0].points())[:, :3]
+            cached = (sm.keys.size, np.stack(column_extremes(fine)))
+            self._fine_boxes[sm.key] = cached
+        return cached[1]
 
     def registration_budget(self, robots: int) -> int:
         """Registrations per update for a team of this many robots with submaps: a large
@@ -227,7 +248,7 @@ class MapMerger:
         for target, source in pairs:
             if len(chosen) == budget:
                 break
-            if self._near_share(target, source) >= self.params.precheck_frac:
+            if self._near_enough(target, source):
                 chosen.append((target, source))
             else:
                 self.registrations[(target.key, source.key)] = None
@@ -253,7 +274,7 @@ class MapMerger:
         subs = {k: store.submaps[k] for k in keys}
         return select(edges, {k: sm.T_reported for k, sm in subs.items()},
                       {k: (sm.robot_id, sm.epoch) for k, sm in subs.items()},
-                      self.params.consistency)
+                      self.params.consistency, self._pcm_memo)
 
     # -- update ----------------------------------------------------------------------------
     def update(self, store: SubmapStore) -> dict[SubmapKey, np.ndarray]:
