@@ -208,3 +208,40 @@ def test_a_bounded_cache_of_prepared_clouds_changes_no_result() -> None:
     assert results[0].keys() == results[1].keys() and results[0]
     for key, T in results[0].items():
         assert np.allclose(T, results[1][key])
+
+
+
+def _after_first_registration(min_clique: int,
+                              ) -> tuple[MapMerger, dict, SubmapStore, dict]:
+    """Robot 1's drift adds up (as in the test above); a merger with the default chain that
+    registers one pair per update, stopped at its first kept registration."""
+    drift = T_from_xyyaw(0.03 * np.cos(0.5), 0.03 * np.sin(0.5), np.deg2rad(0.3))
+    store, truth = build_store(drift, growing=True)
+    params = MergerParams(max_registrations=1,
+                          consistency=ConsistencyParams(tol_m_per_m=0.005, min_clique=min_clique))
+    merger = MapMerger(V, params)
+    changed: dict = {}
+    for _ in range(16):
+        changed = merger.update(store)
+        if any(e is not None for e in merger.registrations.values()):
+            break
+    assert sum(e is not None for e in merger.registrations.values()) == 1
+    return merger, changed, store, truth
+
+
+def test_a_lone_registration_corrects_at_once_with_min_clique_one() -> None:
+    """At 24 robots most robot pairs meet once (docs/edge.md, "One registration per robot
+    pair"): with `min_clique` 1 that registration pulls the drifted robot toward the truth at
+    once; with 2 it waits for a second one between the same two robots."""
+    lone, _, store, truth = _after_first_registration(1)
+    assert lone.inliers and all(lone.inliers.values())
+    for key in [(1, 1), (1, 2), (1, 3)]:
+        reported = pose_change(store.submaps[key].T_reported, truth[key])[0]
+        corrected = pose_change(lone.estimates[key], truth[key])[0]
+        assert reported > 0.03 and corrected < reported - 0.003, (key, reported, corrected)
+    for key in [(0, 0), (0, 1), (0, 2), (1, 0)]:
+        assert pose_change(lone.estimates[key], truth[key])[0] < 0.015
+    waiting, changed, store, _ = _after_first_registration(2)
+    assert not changed and not any(waiting.inliers.values())
+    for key in [(1, 1), (1, 2), (1, 3)]:
+        assert np.array_equal(waiting.estimates[key], store.submaps[key].T_reported)
