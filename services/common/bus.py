@@ -59,6 +59,9 @@ class BusConfig(BaseModel):
     )
 
 
+CONNECT_RETRY = {"period_init_ms": 50, "period_max_ms": 1000, "period_increase_factor": 2}
+
+
 def zenoh_config(
     mode: Literal["client", "peer", "router"],
     connect: list[str] | None = None,
@@ -84,6 +87,9 @@ def zenoh_config(
         conf.insert_json5("connect/endpoints", json.dumps(connect))
         conf.insert_json5("connect/timeout_ms", json.dumps(int(connect_timeout_s * 1000)))
         conf.insert_json5("connect/exit_on_failure", "true")
+        # zenoh retries a refused connect after 1 s at first: a mission's services start
+        # beside their router and would each wait that second for it to listen
+        conf.insert_json5("connect/retry", json.dumps(CONNECT_RETRY))
     if listen is not None:
         conf.insert_json5("listen/endpoints", json.dumps(listen))
     if login is not None:

@@ -130,14 +130,16 @@ def _record(
     with connect(config.bus, identity("monitor")) as bus:
         monitor = Monitor(bus, config.sim.robots, declare=True,
                           camera_every_ticks=camera_ticks(config) if view else 0)
+        if group is not None:
+            # the services take a second or more to import: the recorders open meanwhile;
+            # what arrives before then waits in the monitor's inbox until the first pump
+            start_services(group, out_dir / "config.yaml", config.sim.robots, log_level)
         sampler = CoverageSampler(monitor, probe, sample_every_s, config.sim.tick_s)
         recorders = open_recorders(out_dir, config.sim.robots, config.record, config.sim.tick_s,
                                    monitor.tracks, view)
         monitor.sinks.append(recorders)
         sampler.sinks.append(recorders)
         try:
-            if group is not None:
-                start_services(group, out_dir / "config.yaml", config.sim.robots, log_level)
             sampler.start()
             try:
                 completed = _watch(monitor, sampler, group, config, stall_timeout_s, console)
