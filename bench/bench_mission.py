@@ -8,7 +8,12 @@ and where the CPU went (each run's profile.json: CPU seconds per process).
 
 `--tls both` alternates runs with mutual TLS (the default) and plain TCP (`bus.tls=false`),
 in the order TLS, TCP, TCP, TLS, ... so that a load drift on a shared machine hits both
-alike, and prints a table for each.
+alike, and prints a table for each. `--baseline DIR` does the same between the code of
+another checkout (say `git worktree add /tmp/before HEAD~1`) and this one, with this
+interpreter, for a speed change that must leave every result alone:
+
+    .venv/bin/python bench/bench_mission.py --robots 3 --sim-time 1 --repeats 8 \
+        --baseline /tmp/before
 """
 
 from __future__ import annotations
@@ -19,15 +24,16 @@ import statistics
 import subprocess
 import sys
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 
 
-def run_once(out: Path, args: list[str]) -> tuple[dict, dict]:
-    """(metrics.json, profile.json) of one `spacemap run`."""
+def run_once(out: Path, args: list[str], code: Path = REPO) -> tuple[dict, dict]:
+    """(metrics.json, profile.json) of one `spacemap run` of the checkout at `code`."""
     cmd = [sys.executable, "-m", "services", "run", "--out", str(out), *args]
-    subprocess.run(cmd, cwd=REPO, check=True, capture_output=True)
+    subprocess.run(cmd, cwd=code, check=True, capture_output=True)
     return (json.loads((out / "metrics.json").read_text()),
             json.loads((out / "profile.json").read_text()))
 
@@ -62,35 +68,56 @@ def main() -> None:
                         help="config override passed to spacemap run (repeatable)")
     parser.add_argument("--tls", choices=["on", "off", "both"], default="on",
                         help="links: mutual TLS (default), plain TCP, or alternate the two")
+    parser.add_argument("--baseline", type=Path, default=None,
+                        help="another checkout: alternate its runs with this one's (ABBA)")
     opts = parser.parse_args()
+    if opts.baseline is not None and opts.tls == "both":
+        parser.error("--baseline and --tls both each compare two settings: choose one")
     args = ["--robots", str(opts.robots), "--sim-time", str(opts.sim_time),
             "--world", opts.world, "--seed", str(opts.seed)]
     if opts.sample_every is not None:
         args += ["--sample-every", str(opts.sample_every)]
     for item in opts.set:
         args += ["--set", item]
-    modes = {"on": [True], "off": [False], "both": [True, False]}[opts.tls]
-    results: dict[bool, tuple[list[dict], list[dict]]] = {m: ([], []) for m in modes}
+    variants = _variants(opts.tls, opts.baseline)
+    results: dict[str, tuple[list[dict], list[dict]]] = {v.label: ([], []) for v in variants}
     with tempfile.TemporaryDirectory() as tmp:
         root = opts.keep or Path(tmp)
         for i in range(opts.repeats):
-            for tls in modes if i % 2 == 0 else modes[::-1]:  # ABBA: fair to a load drift
-                extra = [] if tls else ["--set", "bus.tls=false"]
-                metrics, profile = run_once(root / f"run{i}{'' if tls else '-tcp'}",
-                                            args + extra)
-                results[tls][0].append(metrics)
-                results[tls][1].append(profile)
-    for tls, (runs, profiles) in results.items():
-        link = "mutual TLS" if tls else "plain TCP (bus.tls=false)"
-        print(f"## {link}\n\nspacemap run {' '.join(args)}; {opts.repeats} runs, medians\n")
+            for v in variants if i % 2 == 0 else variants[::-1]:  # ABBA: fair to a load drift
+                metrics, profile = run_once(root / f"run{i}{v.suffix}", args + v.extra, v.code)
+                results[v.label][0].append(metrics)
+                results[v.label][1].append(profile)
+    for label, (runs, profiles) in results.items():
+        print(f"## {label}\n\nspacemap run {' '.join(args)}; {opts.repeats} runs, medians\n")
         report(runs, profiles)
     if len(results) == 2:
-        rtf = {t: statistics.median(float(p["real_time_factor"]) for p in results[t][1])
-               for t in results}
-        print(f"real-time factor, TLS / plain TCP (medians): {rtf[True] / rtf[False]:.3f}")
-        same = all(_no_wall(a) == _no_wall(b) for a, b in zip(*(results[t][0] for t in results),
-                                                              strict=True))
-        print(f"metrics.json of each TLS run equal to its plain TCP run's: {same}")
+        (a, (runs_a, prof_a)), (b, (runs_b, prof_b)) = results.items()
+        rtf_a, rtf_b = (statistics.median(float(p["real_time_factor"]) for p in prof)
+                        for prof in (prof_a, prof_b))
+        wall_a, wall_b = (statistics.median(float(p["wall_time_s"]) for p in prof)
+                          for prof in (prof_a, prof_b))
+        print(f"real-time factor, {a} / {b} (medians): {rtf_a / rtf_b:.3f}; wall time s "
+              f"{wall_a:.2f} against {wall_b:.2f}")
+        same = all(_no_wall(x) == _no_wall(y) for x, y in zip(runs_a, runs_b, strict=True))
+        print(f"metrics.json of each {a} run equal to its {b} run's: {same}")
+
+
+@dataclass(frozen=True)
+class Variant:
+    label: str
+    code: Path  # the checkout that runs
+    extra: list[str]  # more `spacemap run` arguments
+    suffix: str  # of the run folders
+
+
+def _variants(tls: str, baseline: Path | None) -> list[Variant]:
+    if baseline is not None:
+        return [Variant(f"this checkout ({REPO})", REPO, [], ""),
+                Variant(f"baseline ({baseline})", baseline.resolve(), [], "-baseline")]
+    on = Variant("mutual TLS", REPO, [], "")
+    off = Variant("plain TCP (bus.tls=false)", REPO, ["--set", "bus.tls=false"], "-tcp")
+    return {"on": [on], "off": [off], "both": [on, off]}[tls]
 
 
 def _no_wall(metrics: dict) -> dict:
