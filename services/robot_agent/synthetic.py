@@ -62,3 +62,28 @@ def render(
 
 def T_world_cam_of(x: float, y: float, yaw: float, T_base_cam: np.ndarray) -> np.ndarray:
     return T_from_xyyaw(x, y, yaw) @ T_base_cam
+
+
+def aisle_points(rng: np.random.Generator, n_face: int = 60_000) -> np.ndarray:
+    """(N, 3) world points of a warehouse aisle: two rack faces at y = ±1.2 m from x = −2 to
+    20 m, 0.05-1.5 m high, with 8 cm uprights every 2.7 m on both."""
+    faces = np.c_[rng.uniform(-2.0, 20.0, n_face), rng.choice([-1.2, 1.2], n_face),
+                  rng.uniform(0.05, 1.5, n_face)]
+    uprights = [np.c_[x0 + rng.uniform(0.0, 0.08, 800), side - np.sign(side) *
+                      rng.uniform(0.0, 0.08, 800), rng.uniform(0.05, 1.5, 800)]
+                for x0 in np.arange(-2.0, 20.0, 2.7) for side in (-1.2, 1.2)]
+    return np.vstack([faces, *uprights])
+
+
+def aisle_frame(points_world: np.ndarray, x: float, rng: np.random.Generator,
+                range_m: float = 5.0, noise_per_m2: float = 0.0005,
+                half_fov_rad: float = np.radians(42.0)) -> np.ndarray:
+    """(N, 3) base-frame points a forward camera at (x, 0, yaw 0) sees of `points_world`,
+    within `range_m` and the field of view, with the simulator's depth noise along each ray
+    (σ = noise_per_m2 · d²)."""
+    base = points_world - np.array([x, 0.0, 0.0])
+    r = np.hypot(base[:, 0], base[:, 1])
+    seen = base[(base[:, 0] > 0.3) & (r < range_m)
+                & (np.abs(np.arctan2(base[:, 1], base[:, 0])) < half_fov_rad)]
+    d = np.linalg.norm(seen, axis=1, keepdims=True)
+    return seen + seen / d * noise_per_m2 * d**2 * rng.standard_normal((len(seen), 1))
