@@ -52,3 +52,15 @@ def test_the_localizer_aligns_the_near_points_and_maps_them_all() -> None:
     assert np.hypot(cloud.points()[:, 0], cloud.points()[:, 1]).max() <= 3.0
     full = near.registrar.cloud_tree(points)[0]
     assert np.hypot(full.points()[:, 0], full.points()[:, 1]).max() > 4.5
+
+
+def test_the_localizer_aligns_the_points_inside_a_bearing_and_maps_them_all() -> None:
+    points = aisle_frame(aisle_points(np.random.default_rng(0)), 0.0, np.random.default_rng(1))
+    narrow = Localizer(RegistrationParams(filter=FilterParams(),
+                                          align_max_bearing_rad=np.radians(30.0)))
+    cloud = narrow._align_cloud(points)
+    assert cloud is not None
+    bearing = np.abs(np.arctan2(cloud.points()[:, 1], cloud.points()[:, 0]))
+    assert bearing.max() <= np.radians(30.0) + 0.02  # voxel means of the points kept
+    full = narrow.registrar.cloud_tree(points)[0]
+    assert np.abs(np.arctan2(full.points()[:, 1], full.points()[:, 0])).max() > np.radians(38.0)

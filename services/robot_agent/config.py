@@ -208,6 +208,10 @@ class AgentConfig(BaseModel):
     reg_align_max_range_m: float = Field(
         default=0.0, ge=0, description="register a frame with its points within this range "
         "only (m; 0 = all); it joins the map whole")
+    reg_align_max_bearing_deg: float = Field(
+        default=0.0, ge=0, lt=90, description="... and within this bearing of straight ahead "
+        "(base frame, deg; 0 = all): the view's side edges pull back too (docs/agent.md, "
+        "'Both edges of the view pull back')")
     odom_calibration_prior_segments: float = Field(
         default=2.0, ge=0, description="the calibration's prior at 'no error' weighs this many "
         "1 m segments (fewer: learned sooner, trusting the first segments more)")

@@ -193,12 +193,18 @@ class Localizer:
         return False
 
     def _align_cloud(self, points_base: np.ndarray) -> small_gicp.PointCloud | None:
-        """The frame's points within `align_max_range_m`, downsampled (None: all of them)."""
-        max_range = self.registrar.params.align_max_range_m
-        if max_range <= 0:
+        """The frame's points within `align_max_range_m` and `align_max_bearing_rad`,
+        downsampled (None: all of them)."""
+        p = self.registrar.params
+        if p.align_max_range_m <= 0 and p.align_max_bearing_rad <= 0:
             return None
-        near = np.hypot(points_base[:, 0], points_base[:, 1]) <= max_range
-        return self.registrar._cloud(points_base[near])
+        keep = np.ones(len(points_base), bool)
+        if p.align_max_range_m > 0:
+            keep &= np.hypot(points_base[:, 0], points_base[:, 1]) <= p.align_max_range_m
+        if p.align_max_bearing_rad > 0:
+            keep &= np.abs(np.arctan2(points_base[:, 1], points_base[:, 0])) \
+                <= p.align_max_bearing_rad
+        return self.registrar._cloud(points_base[keep])
 
     def _filtered(self, frame: tuple[small_gicp.PointCloud, small_gicp.KdTree] | None,
                   guess: np.ndarray, filt: FilterParams,

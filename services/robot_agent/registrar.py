@@ -47,6 +47,7 @@ class RegistrationParams:
     # map: the map's far edge holds half-seen voxels whose means sit toward where the robot
     # was, and along an aisle they pull every frame back (0.2-0.3 % of the distance driven)
     align_max_range_m: float = 0.0
+    align_max_bearing_rad: float = 0.0  # ... and within this bearing of straight ahead (0 = all)
     degenerate_ratio: float = 0.0  # weakest / strongest translation information below this:
     # the correction along the weak direction is dropped (0 = never)
     # a Kalman filter on the pose (drift_filter.py) instead of the jump gate; frames it
