@@ -28,13 +28,31 @@ from services.robot_agent.registrar import FrameRegistrar, RegistrationParams  #
 from services.robot_agent.synthetic import aisle_frame, aisle_points  # noqa: E402
 
 HALF_FOV_DEG = 42.0
+RANGE_M = 5.0  # synthetic.aisle_frame's camera range
 STEP_M, DRIVE_M = 0.1, 6.0
-# (align range m or 0 for all, bearing margin deg inside the field of view or 0 for none)
-VARIANTS = [(0.0, 0.0), (4.0, 0.0), (0.0, 8.0), (4.0, 8.0), (3.5, 10.0)]
+CELL_M = 0.08  # the registrar's downsampling cell (RegistrationParams.downsample_m)
+# (align range m or 0 for all, bearing margin deg inside the field of view or 0 for none,
+# whether only points in downsampling cells wholly inside the view are aligned and inserted)
+VARIANTS = [(0.0, 0.0, False), (4.0, 0.0, False), (0.0, 8.0, False), (4.0, 8.0, False),
+            (3.5, 10.0, False), (0.0, 0.0, True)]
+_CORNERS = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+
+
+def in_whole_cells(points: np.ndarray, cell_m: float = CELL_M) -> np.ndarray:
+    """(N,) whether each point's cell (base frame) lies wholly inside the camera's range and
+    horizontal field of view: a cell the view cuts holds only its near part, and its mean
+    sits back toward the robot."""
+    idx = np.floor(points / cell_m).astype(np.int64)
+    cells, inverse = np.unique(idx, axis=0, return_inverse=True)
+    corners = (cells[:, None, :] + _CORNERS[None]) * cell_m
+    inside = ((np.hypot(corners[..., 0], corners[..., 1]) < RANGE_M)
+              & (np.degrees(np.abs(np.arctan2(corners[..., 1], corners[..., 0]))) < HALF_FOV_DEG)
+              & (corners[..., 0] > 0.3)).all(axis=1)
+    return inside[inverse.ravel()]
 
 
 def chain_lag_m(seed: int, voxel_m: float, range_m: float, margin_deg: float,
-                noise_per_m2: float = 0.0005) -> float:
+                whole_cells: bool = False, noise_per_m2: float = 0.0005) -> float:
     """Final along-track error of the registered chain (m; < 0: behind the truth)."""
     world = aisle_points(np.random.default_rng(0))
     rng = np.random.default_rng(seed)
@@ -44,6 +62,8 @@ def chain_lag_m(seed: int, voxel_m: float, range_m: float, margin_deg: float,
     for i, x in enumerate(xs):
         points = aisle_frame(world, x, rng, noise_per_m2=noise_per_m2,
                              half_fov_rad=np.radians(HALF_FOV_DEG))
+        if whole_cells:
+            points = points[in_whole_cells(points)]
         if i:
             keep = np.ones(len(points), bool)
             if range_m > 0:
@@ -73,11 +93,13 @@ def main() -> None:
     print("| map voxel m | aligned points | lag cm per seed | median cm | % of 6 m |")
     print("|---:|---|---|---:|---:|")
     for voxel in args.voxel or [0.05]:
-        for range_m, margin in VARIANTS:
-            lags = [100 * chain_lag_m(s, voxel, range_m, margin, args.noise)
+        for range_m, margin, whole in VARIANTS:
+            lags = [100 * chain_lag_m(s, voxel, range_m, margin, whole, args.noise)
                     for s in range(1, args.seeds + 1)]
             what = ", ".join(filter(None, [f"within {range_m:g} m" if range_m else "",
                                            f"{margin:g}° inside the view's edges" if margin
+                                           else "",
+                                           "whole cells only (aligned and mapped)" if whole
                                            else ""])) or "all"
             med = statistics.median(lags)
             print(f"| {voxel:g} | {what} | {' / '.join(f'{v:+.2f}' for v in lags)} | "
