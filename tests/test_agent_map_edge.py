@@ -64,3 +64,17 @@ def test_the_localizer_aligns_the_points_inside_a_bearing_and_maps_them_all() ->
     assert bearing.max() <= np.radians(30.0) + 0.02  # voxel means of the points kept
     full = narrow.registrar.cloud_tree(points)[0]
     assert np.abs(np.arctan2(full.points()[:, 1], full.points()[:, 0])).max() > np.radians(38.0)
+
+
+def test_more_neighbors_give_smoother_normals_to_the_far_noisy_points() -> None:
+    points = aisle_frame(aisle_points(np.random.default_rng(0)), 0.0, np.random.default_rng(1))
+    far = np.hypot(points[:, 0], points[:, 1]) > 4.0
+
+    def normal_spread(neighbors: int) -> float:
+        cloud = FrameRegistrar(RegistrationParams(neighbors=neighbors)).cloud_tree(points[far])
+        assert cloud is not None
+        normals = cloud[0].normals()[:, :3]
+        on_wall = np.abs(normals[:, 1]) > 0.5  # the rack faces' normals point across the aisle
+        return float(np.std(normals[on_wall, 0]))  # their along-aisle tilt
+
+    assert normal_spread(20) < normal_spread(10)

@@ -208,6 +208,9 @@ class AgentConfig(BaseModel):
     reg_align_max_range_m: float = Field(
         default=0.0, ge=0, description="register a frame with its points within this range "
         "only (m; 0 = all); it joins the map whole")
+    reg_neighbors: int = Field(
+        default=10, ge=3, description="points per covariance and normal estimate of a "
+        "frame's downsampled points (more: smoother normals where far points are noisy)")
     reg_align_max_bearing_deg: float = Field(
         default=0.0, ge=0, lt=90, description="... and within this bearing of straight ahead "
         "(base frame, deg; 0 = all): the view's side edges pull back too (docs/agent.md, "

@@ -31,6 +31,7 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
         reset_on_wall_conflict_rad=cfg.reg_wall_reset_conflict_rad,
         max_corr_m=cfg.reg_max_corr_m,
         align_max_range_m=cfg.reg_align_max_range_m,
+        neighbors=cfg.reg_neighbors,
         align_max_bearing_rad=math.radians(cfg.reg_align_max_bearing_deg),
         coarse_voxel_m=cfg.reg_coarse_voxel_m, coarse_below_frac=cfg.reg_coarse_below_frac,
         coarse_agree_rad=cfg.reg_coarse_agree_rad,

@@ -27,6 +27,7 @@ from services.robot_agent.wall_heading import WallHeadingParams
 @dataclass(frozen=True)
 class RegistrationParams:
     downsample_m: float = 0.08  # source frame voxel size
+    neighbors: int = 10  # points per covariance (and normal) estimate
     map_voxel_m: float = 0.15  # Gaussian voxel map resolution
     max_corr_m: float = 0.3
     max_iterations: int = 15
@@ -137,7 +138,7 @@ class FrameRegistrar:
             return None
         cloud, tree = small_gicp.preprocess_points(
             np.ascontiguousarray(pts, dtype=np.float64), self.params.downsample_m,
-            num_neighbors=10, num_threads=1,
+            num_neighbors=self.params.neighbors, num_threads=1,
         )
         return (cloud, tree) if cloud.size() >= self.params.min_points else None
 
