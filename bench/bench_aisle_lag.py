@@ -26,16 +26,28 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from services.common.geometry import T_from_xyyaw, xyyaw_from_T  # noqa: E402
 from services.robot_agent.registrar import FrameRegistrar, RegistrationParams  # noqa: E402
 from services.robot_agent.synthetic import aisle_frame, aisle_points  # noqa: E402
+from services.robot_agent.view_voxels import whole_voxel_mask  # noqa: E402
 
 HALF_FOV_DEG = 42.0
 RANGE_M = 5.0  # synthetic.aisle_frame's camera range
 STEP_M, DRIVE_M = 0.1, 6.0
 CELL_M = 0.08  # the registrar's downsampling cell (RegistrationParams.downsample_m)
 # (align range m or 0 for all, bearing margin deg inside the field of view or 0 for none,
-# whether only points in downsampling cells wholly inside the view are aligned and inserted)
-VARIANTS = [(0.0, 0.0, False), (4.0, 0.0, False), (0.0, 8.0, False), (4.0, 8.0, False),
-            (3.5, 10.0, False), (0.0, 0.0, True)]
+# which points a frame keeps, aligned and inserted: "" all, "cells" those in downsampling
+# cells (base frame) wholly inside the view, "voxels" those in registration-map voxels (loc
+# frame, the agent's `reg_whole_voxels`) wholly inside it)
+VARIANTS = [(0.0, 0.0, ""), (4.0, 0.0, ""), (0.0, 8.0, ""), (4.0, 8.0, ""),
+            (3.5, 10.0, ""), (0.0, 0.0, "cells"), (0.0, 0.0, "voxels")]
+WHAT = {"": "", "cells": "whole downsampling cells only (aligned and mapped)",
+        "voxels": "whole map voxels only (aligned and mapped)"}
 _CORNERS = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+
+
+def in_view(points_base: np.ndarray) -> np.ndarray:
+    """(N,) whether base-frame points lie in `synthetic.aisle_frame`'s view."""
+    return ((points_base[:, 0] > 0.3) & (np.hypot(points_base[:, 0], points_base[:, 1]) < RANGE_M)
+            & (np.abs(np.arctan2(points_base[:, 1], points_base[:, 0]))
+               < np.radians(HALF_FOV_DEG)))
 
 
 def in_whole_cells(points: np.ndarray, cell_m: float = CELL_M) -> np.ndarray:
@@ -52,7 +64,7 @@ def in_whole_cells(points: np.ndarray, cell_m: float = CELL_M) -> np.ndarray:
 
 
 def chain_lag_m(seed: int, voxel_m: float, range_m: float, margin_deg: float,
-                whole_cells: bool = False, noise_per_m2: float = 0.0005) -> float:
+                whole: str = "", noise_per_m2: float = 0.0005) -> float:
     """Final along-track error of the registered chain (m; < 0: behind the truth)."""
     world = aisle_points(np.random.default_rng(0))
     rng = np.random.default_rng(seed)
@@ -62,8 +74,11 @@ def chain_lag_m(seed: int, voxel_m: float, range_m: float, margin_deg: float,
     for i, x in enumerate(xs):
         points = aisle_frame(world, x, rng, noise_per_m2=noise_per_m2,
                              half_fov_rad=np.radians(HALF_FOV_DEG))
-        if whole_cells:
+        if whole == "cells":
             points = points[in_whole_cells(points)]
+        elif whole == "voxels":  # at the odometry guess, as the agent does
+            guess = T_from_xyyaw(est + STEP_M if i else 0.0, 0.0, 0.0)
+            points = points[whole_voxel_mask(points, guess, voxel_m, in_view)]
         if i:
             keep = np.ones(len(points), bool)
             if range_m > 0:
@@ -98,9 +113,7 @@ def main() -> None:
                     for s in range(1, args.seeds + 1)]
             what = ", ".join(filter(None, [f"within {range_m:g} m" if range_m else "",
                                            f"{margin:g}° inside the view's edges" if margin
-                                           else "",
-                                           "whole cells only (aligned and mapped)" if whole
-                                           else ""])) or "all"
+                                           else "", WHAT[whole]])) or "all"
             med = statistics.median(lags)
             print(f"| {voxel:g} | {what} | {' / '.join(f'{v:+.2f}' for v in lags)} | "
                   f"{med:+.2f} | {med / DRIVE_M:+.2f} |", flush=True)

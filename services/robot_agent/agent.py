@@ -50,6 +50,7 @@ from services.robot_agent.outbox import Outbox, Outgoing, TickResult
 from services.robot_agent.params import drf_params, loop_params, registration_params
 from services.robot_agent.projection import cam_to_base, depth_to_points, hfov_of, pixel_colors
 from services.robot_agent.teammates import predict_xy, teammates_xy
+from services.robot_agent.view_voxels import CameraView, whole_voxel_mask
 from services.robot_agent.yielding import YieldRule
 
 if TYPE_CHECKING:
@@ -209,7 +210,8 @@ class AgentCore:
             cam, points_base = self._filtered_points(frame, T_loc_base, odom.tick)
             removed = self._drf_removed_frac(frame)
             self.view_hidden = removed > self.config.reg_max_removed_frac
-            T_loc_base = self._register(points_base, T_odom_base, removed)
+            T_loc_base = self._register(self._whole_voxels(points_base, frame, T_loc_base),
+                                        T_odom_base, removed)
         T_world_base = self._T_world_front() @ T_loc_base
         pose_world = xyyaw_from_T(T_world_base)
         self._ensure_grid(pose_world)
@@ -329,6 +331,17 @@ class AgentCore:
             self.last_drf = DrfRecord(tick, pose_world, targets, mask)
         cam = depth_to_points(depth, frame.K, self.config.pixel_stride, frame.range_max_m)
         return cam, cam_to_base(cam.points_cam, frame.T_base_cam)
+
+    def _whole_voxels(self, points_base: np.ndarray, frame: RgbdFrame,
+                      T_loc_base: np.ndarray) -> np.ndarray:
+        """The points to register: with `reg_whole_voxels`, those whose registration-map voxel
+        the view holds whole at the odometry guess (the mapping keeps them all)."""
+        if not self.config.reg_whole_voxels:
+            return points_base
+        h, w = frame.depth_m.shape
+        view = CameraView(frame.K, w, h, frame.range_max_m, frame.T_base_cam)
+        return points_base[whole_voxel_mask(points_base, T_loc_base,
+                                            self.config.reg_map_voxel_m, view.contains)]
 
     def _drf_removed_frac(self, frame: RgbdFrame) -> float:
         """Share of the frame's valid pixels the DRF removed (a teammate close to the lens)."""

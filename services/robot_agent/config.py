@@ -215,6 +215,10 @@ class AgentConfig(BaseModel):
         default=0.0, ge=0, lt=90, description="... and within this bearing of straight ahead "
         "(base frame, deg; 0 = all): the view's side edges pull back too (docs/agent.md, "
         "'Both edges of the view pull back')")
+    reg_whole_voxels: bool = Field(
+        default=False, description="register (and map for registration) only the points "
+        "whose registration-map voxel lies wholly inside the camera's view: a voxel the view "
+        "cuts holds its inner part only and pulls the next frames back (view_voxels.py)")
     odom_calibration_prior_segments: float = Field(
         default=2.0, ge=0, description="the calibration's prior at 'no error' weighs this many "
         "1 m segments (fewer: learned sooner, trusting the first segments more)")

@@ -1,0 +1,82 @@
+"""Registration keeps the points of the map voxels the view saw whole (view_voxels.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from services.common.geometry import T_from_xyyaw, xyyaw_from_T
+from services.robot_agent.registrar import FrameRegistrar, RegistrationParams
+from services.robot_agent.synthetic import aisle_frame, aisle_points
+from services.robot_agent.view_voxels import CameraView, whole_voxel_mask
+
+# a forward camera 0.2 m up: optical z along base x, optical x along −base y, y along −z
+T_BASE_CAM = np.array([[0.0, 0.0, 1.0, 0.0], [-1.0, 0.0, 0.0, 0.0], [0.0, -1.0, 0.0, 0.2],
+                       [0.0, 0.0, 0.0, 1.0]])
+K = np.array([[80.0, 0.0, 79.5], [0.0, 80.0, 59.5], [0.0, 0.0, 1.0]])
+VIEW = CameraView(K, 160, 120, 5.0, T_BASE_CAM)
+
+
+def test_the_camera_view_holds_what_the_image_and_range_hold() -> None:
+    points_base = np.array([[2.0, 0.0, 0.2],  # straight ahead
+                            [5.5, 0.0, 0.2],  # beyond the range
+                            [-1.0, 0.0, 0.2],  # behind
+                            [1.0, 1.5, 0.2],  # left of the 90° image (45° half angle)
+                            [1.0, 0.9, 0.2]])  # just inside it
+    assert VIEW.contains(points_base).tolist() == [True, False, False, False, True]
+
+
+def test_points_of_voxels_the_range_cuts_are_left_out() -> None:
+    # a wall across the view at 4.98 m: its 5 cm voxels span 4.95-5.00 (whole) and a row of
+    # points at 5.01-5.04 would sit in 5.00-5.05 voxels, cut by the 5 m range
+    y, z = np.meshgrid(np.linspace(-0.5, 0.5, 21), np.linspace(0.1, 0.5, 9))
+    wall = np.stack([np.full(y.size, 4.98), y.ravel(), z.ravel()], axis=1)
+    beyond = wall + [0.04, 0.0, 0.0]
+    mask = whole_voxel_mask(np.concatenate([wall, beyond]), np.eye(4), 0.05, VIEW.contains)
+    assert mask[: len(wall)].all() and not mask[len(wall):].any()
+
+
+def test_the_voxel_grid_is_the_map_frame_s() -> None:
+    # the same base-frame point, with the base 3 cm further on: its map voxel moves across the
+    # range's edge
+    point = np.array([[4.97, 0.0, 0.22]])
+    assert whole_voxel_mask(point, np.eye(4), 0.05, VIEW.contains).all()
+    assert not whole_voxel_mask(point, T_from_xyyaw(0.03, 0.0, 0.0), 0.05, VIEW.contains).any()
+
+
+def test_bad_input_is_refused_or_empty() -> None:
+    assert whole_voxel_mask(np.empty((0, 3)), np.eye(4), 0.05, VIEW.contains).shape == (0,)
+    with pytest.raises(ValueError, match="voxel_m"):
+        whole_voxel_mask(np.zeros((1, 3)), np.eye(4), 0.0, VIEW.contains)
+
+
+def _aisle_view(points_base: np.ndarray) -> np.ndarray:
+    """synthetic.aisle_frame's view: 0.3-5 m, 42° either side."""
+    r = np.hypot(points_base[:, 0], points_base[:, 1])
+    return (points_base[:, 0] > 0.3) & (r < 5.0) & (
+        np.abs(np.arctan2(points_base[:, 1], points_base[:, 0])) < np.radians(42.0))
+
+
+def _lag_over_6_m(whole: bool) -> float:
+    world = aisle_points(np.random.default_rng(0))
+    rng = np.random.default_rng(1)
+    reg = FrameRegistrar(RegistrationParams(map_voxel_m=0.05))
+    est = 0.0
+    for i, x in enumerate(np.arange(0.0, 6.01, 0.1)):
+        points = aisle_frame(world, x, rng)
+        guess = T_from_xyyaw(est + 0.1 if i else 0.0, 0.0, 0.0)
+        if whole:
+            points = points[whole_voxel_mask(points, guess, 0.05, _aisle_view)]
+        cloud = reg.cloud_tree(points)[0]
+        if i:
+            aligned = reg.align(cloud, guess)
+            assert not isinstance(aligned, str)
+            est = xyyaw_from_T(aligned[0])[0]
+        reg.insert(cloud, T_from_xyyaw(est, 0.0, 0.0))
+    return est - 6.0
+
+
+def test_whole_voxels_take_most_of_the_lag_out_of_an_aisle() -> None:
+    every, whole = _lag_over_6_m(False), _lag_over_6_m(True)
+    assert every < -0.02  # all points: the chain lags 2-3 cm over 6 m
+    assert abs(whole) < 0.6 * abs(every)
