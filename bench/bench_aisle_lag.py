@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from services.common.geometry import T_from_xyyaw, xyyaw_from_T  # noqa: E402
 from services.robot_agent.registrar import FrameRegistrar, RegistrationParams  # noqa: E402
 from services.robot_agent.synthetic import aisle_frame, aisle_points  # noqa: E402
-from services.robot_agent.view_voxels import whole_voxel_mask  # noqa: E402
+from services.robot_agent.view_voxels import corners_inside, whole_voxel_mask  # noqa: E402
 
 HALF_FOV_DEG = 42.0
 RANGE_M = 5.0  # synthetic.aisle_frame's camera range
@@ -78,7 +78,7 @@ def chain_lag_m(seed: int, voxel_m: float, range_m: float, margin_deg: float,
             points = points[in_whole_cells(points)]
         elif whole == "voxels":  # at the odometry guess, as the agent does
             guess = T_from_xyyaw(est + STEP_M if i else 0.0, 0.0, 0.0)
-            points = points[whole_voxel_mask(points, guess, voxel_m, in_view)]
+            points = points[whole_voxel_mask(points, guess, voxel_m, corners_inside(in_view))]
         if i:
             keep = np.ones(len(points), bool)
             if range_m > 0:

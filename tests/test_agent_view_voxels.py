@@ -8,7 +8,7 @@ import pytest
 from services.common.geometry import T_from_xyyaw, xyyaw_from_T
 from services.robot_agent.registrar import FrameRegistrar, RegistrationParams
 from services.robot_agent.synthetic import aisle_frame, aisle_points
-from services.robot_agent.view_voxels import CameraView, whole_voxel_mask
+from services.robot_agent.view_voxels import CameraView, corners_inside, whole_voxel_mask
 
 # a forward camera 0.2 m up: optical z along base x, optical x along −base y, y along −z
 T_BASE_CAM = np.array([[0.0, 0.0, 1.0, 0.0], [-1.0, 0.0, 0.0, 0.0], [0.0, -1.0, 0.0, 0.2],
@@ -32,7 +32,7 @@ def test_points_of_voxels_the_range_cuts_are_left_out() -> None:
     y, z = np.meshgrid(np.linspace(-0.5, 0.5, 21), np.linspace(0.1, 0.5, 9))
     wall = np.stack([np.full(y.size, 4.98), y.ravel(), z.ravel()], axis=1)
     beyond = wall + [0.04, 0.0, 0.0]
-    mask = whole_voxel_mask(np.concatenate([wall, beyond]), np.eye(4), 0.05, VIEW.contains)
+    mask = whole_voxel_mask(np.concatenate([wall, beyond]), np.eye(4), 0.05, VIEW.holds_whole)
     assert mask[: len(wall)].all() and not mask[len(wall):].any()
 
 
@@ -40,14 +40,26 @@ def test_the_voxel_grid_is_the_map_frame_s() -> None:
     # the same base-frame point, with the base 3 cm further on: its map voxel moves across the
     # range's edge
     point = np.array([[4.97, 0.0, 0.22]])
-    assert whole_voxel_mask(point, np.eye(4), 0.05, VIEW.contains).all()
-    assert not whole_voxel_mask(point, T_from_xyyaw(0.03, 0.0, 0.0), 0.05, VIEW.contains).any()
+    assert whole_voxel_mask(point, np.eye(4), 0.05, VIEW.holds_whole).all()
+    assert not whole_voxel_mask(point, T_from_xyyaw(0.03, 0.0, 0.0), 0.05, VIEW.holds_whole).any()
+
+
+def test_a_voxel_over_pixels_without_a_return_is_cut() -> None:
+    y, z = np.meshgrid(np.linspace(-0.5, 0.5, 41), np.linspace(0.1, 0.3, 9))
+    wall = np.stack([np.full(y.size, 2.98), y.ravel(), z.ravel()], axis=1)
+    valid = np.ones((120, 160), bool)
+    every = CameraView(K, 160, 120, 5.0, T_BASE_CAM, valid)
+    assert whole_voxel_mask(wall, np.eye(4), 0.05, every.holds_whole).all()
+    valid[:, 80:] = False  # no returns right of the centre (base −y): grazing, say
+    half = CameraView(K, 160, 120, 5.0, T_BASE_CAM, valid)
+    mask = whole_voxel_mask(wall, np.eye(4), 0.05, half.holds_whole)
+    assert mask[wall[:, 1] > 0.05].all() and not mask[wall[:, 1] < 0.0].any()
 
 
 def test_bad_input_is_refused_or_empty() -> None:
-    assert whole_voxel_mask(np.empty((0, 3)), np.eye(4), 0.05, VIEW.contains).shape == (0,)
+    assert whole_voxel_mask(np.empty((0, 3)), np.eye(4), 0.05, VIEW.holds_whole).shape == (0,)
     with pytest.raises(ValueError, match="voxel_m"):
-        whole_voxel_mask(np.zeros((1, 3)), np.eye(4), 0.0, VIEW.contains)
+        whole_voxel_mask(np.zeros((1, 3)), np.eye(4), 0.0, VIEW.holds_whole)
 
 
 def _aisle_view(points_base: np.ndarray) -> np.ndarray:
@@ -66,7 +78,7 @@ def _lag_over_6_m(whole: bool) -> float:
         points = aisle_frame(world, x, rng)
         guess = T_from_xyyaw(est + 0.1 if i else 0.0, 0.0, 0.0)
         if whole:
-            points = points[whole_voxel_mask(points, guess, 0.05, _aisle_view)]
+            points = points[whole_voxel_mask(points, guess, 0.05, corners_inside(_aisle_view))]
         cloud = reg.cloud_tree(points)[0]
         if i:
             aligned = reg.align(cloud, guess)

@@ -335,13 +335,20 @@ class AgentCore:
     def _whole_voxels(self, points_base: np.ndarray, frame: RgbdFrame,
                       T_loc_base: np.ndarray) -> np.ndarray:
         """The points to register: with `reg_whole_voxels`, those whose registration-map voxel
-        the view holds whole at the odometry guess (the mapping keeps them all)."""
-        if not self.config.reg_whole_voxels:
+        the frame saw whole at the odometry guess (the mapping keeps them all)."""
+        mode = self.config.reg_whole_voxels
+        if mode == "off":
             return points_base
-        h, w = frame.depth_m.shape
-        view = CameraView(frame.K, w, h, frame.range_max_m, frame.T_base_cam)
+        depth = frame.depth_m
+        valid = None
+        if mode == "pixels":
+            valid = np.isfinite(depth) & (depth > 0) & (depth <= frame.range_max_m)
+            if self.last_drf is not None and self.last_drf.tick == frame.tick:
+                valid &= ~self.last_drf.mask
+        view = CameraView(frame.K, depth.shape[1], depth.shape[0], frame.range_max_m,
+                          frame.T_base_cam, valid)
         return points_base[whole_voxel_mask(points_base, T_loc_base,
-                                            self.config.reg_map_voxel_m, view.contains)]
+                                            self.config.reg_map_voxel_m, view.holds_whole)]
 
     def _drf_removed_frac(self, frame: RgbdFrame) -> float:
         """Share of the frame's valid pixels the DRF removed (a teammate close to the lens)."""

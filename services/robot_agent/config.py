@@ -215,10 +215,12 @@ class AgentConfig(BaseModel):
         default=0.0, ge=0, lt=90, description="... and within this bearing of straight ahead "
         "(base frame, deg; 0 = all): the view's side edges pull back too (docs/agent.md, "
         "'Both edges of the view pull back')")
-    reg_whole_voxels: bool = Field(
-        default=False, description="register (and map for registration) only the points "
-        "whose registration-map voxel lies wholly inside the camera's view: a voxel the view "
-        "cuts holds its inner part only and pulls the next frames back (view_voxels.py)")
+    reg_whole_voxels: Literal["off", "view", "pixels"] = Field(
+        default="off", description="register (and map for registration) only the points "
+        "whose registration-map voxel the frame saw whole: a voxel the view cuts holds its "
+        "inner part only and pulls the next frames back (view_voxels.py). 'view': all the "
+        "voxel's corners inside the image and the range; 'pixels': inside the image, with a "
+        "return at every pixel of its footprint (cuts by range, grazing angles, the DRF)")
     odom_calibration_prior_segments: float = Field(
         default=2.0, ge=0, description="the calibration's prior at 'no error' weighs this many "
         "1 m segments (fewer: learned sooner, trusting the first segments more)")

@@ -2,11 +2,12 @@
 
 The registration map (`registrar.py`) is a Gaussian voxel map: each voxel keeps the mean and
 covariance of the points that fell in it. A voxel the view's boundary cuts (the range's far
-edge, the image's sides) holds only its inner part, so its mean sits back toward the robot,
-and the next frame, which sees more of it, is pulled back. Along an aisle that bias adds up
-frame after frame (bench/bench_aisle_lag.py; docs/agent.md, "Only voxels the view saw
-whole"). Leaving out the points of the cut voxels, in the map's own grid, removes a layer one
-voxel thick at the boundary: a later frame that sees the voxel whole brings it in.
+edge, the image's sides, returns lost at grazing angles) holds only its inner part, so its
+mean sits back toward the robot, and the next frame, which sees more of it, is pulled back.
+Along an aisle that bias adds up frame after frame (bench/bench_aisle_lag.py; docs/agent.md,
+"Only voxels the view saw whole"). Leaving out the points of the cut voxels, in the map's own
+grid, removes a layer one voxel thick at the boundary: a later frame that sees the voxel whole
+brings it in.
 """
 
 from __future__ import annotations
@@ -22,34 +23,70 @@ _CORNERS = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)],
 # voxel keys packed into one int64: 21 bits per axis, offset so negative indices stay positive
 _BITS, _OFFSET = 21, 1 << 20
 
+HoldsWhole = Callable[[np.ndarray], np.ndarray]  # (M, 8, 3) base-frame corners → (M,) bool
+
 
 @dataclass(frozen=True)
 class CameraView:
-    """What a pinhole depth camera can return: in front of it, inside the image, in range."""
+    """What a pinhole depth camera returned: in front of it, inside the image, in range, and
+    (with `valid`) at pixels that have a return."""
 
     K: np.ndarray  # (3, 3) intrinsics, pixels
     width: int  # image columns
     height: int  # image rows
     range_m: float  # largest depth (along the optical axis) with a return
     T_base_cam: np.ndarray  # (4, 4) optical frame (x right, y down, z forward) → base
+    valid: np.ndarray | None = None  # (height, width) bool: the pixel has a return
+
+    def _pixels(self, points_base: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(u, v, depth) of base-frame points; depth ≤ 0 behind the camera."""
+        p = transform_points(invert(self.T_base_cam), points_base)
+        z = p[:, 2]
+        zs = np.where(z > 1e-6, z, 1.0)
+        return self.K[0, 0] * p[:, 0] / zs + self.K[0, 2], \
+            self.K[1, 1] * p[:, 1] / zs + self.K[1, 2], z
 
     def contains(self, points_base: np.ndarray) -> np.ndarray:
         """(N,) whether each base-frame point lies inside the view (occlusion aside)."""
-        p = transform_points(invert(self.T_base_cam), points_base)
-        z = p[:, 2]
-        ok = (z > 1e-6) & (z <= self.range_m)
-        zs = np.where(ok, z, 1.0)
-        u = self.K[0, 0] * p[:, 0] / zs + self.K[0, 2]
-        v = self.K[1, 1] * p[:, 1] / zs + self.K[1, 2]
+        u, v, z = self._pixels(points_base)
         # pixel centres run 0 … W−1: a corner beyond the outermost centres is not seen
-        return ok & (u >= 0) & (u <= self.width - 1) & (v >= 0) & (v <= self.height - 1)
+        return (z > 1e-6) & (z <= self.range_m) & (u >= 0) & (u <= self.width - 1) \
+            & (v >= 0) & (v <= self.height - 1)
+
+    def holds_whole(self, corners_base: np.ndarray) -> np.ndarray:
+        """(M,) whether each voxel (its (M, 8, 3) base-frame corners) was seen whole: all its
+        corners inside the view and, with `valid`, a return at every pixel of its image
+        footprint (the far ones lost to range, grazing angles or the DRF cut it too; then
+        the corners need only be in front, inside the image)."""
+        m = len(corners_base)
+        if self.valid is None:
+            return self.contains(corners_base.reshape(-1, 3)).reshape(m, 8).all(axis=1)
+        u, v, z = (a.reshape(m, 8) for a in self._pixels(corners_base.reshape(-1, 3)))
+        ok = ((z > 1e-6) & (u >= 0) & (u <= self.width - 1) & (v >= 0)
+              & (v <= self.height - 1)).all(axis=1)
+        c0, c1 = _pixel_index(u.min(axis=1)), _pixel_index(u.max(axis=1))
+        r0, r1 = _pixel_index(v.min(axis=1)), _pixel_index(v.max(axis=1))
+        c0, c1, r0, r1 = (np.where(ok, a, 0) for a in (c0, c1, r0, r1))
+        holes = np.zeros((self.height + 1, self.width + 1), np.int64)
+        holes[1:, 1:] = np.cumsum(np.cumsum(~self.valid, axis=0), axis=1)
+        missing = holes[r1 + 1, c1 + 1] - holes[r0, c1 + 1] - holes[r1 + 1, c0] + holes[r0, c0]
+        return ok & (missing == 0)
+
+
+def _pixel_index(coord: np.ndarray) -> np.ndarray:
+    """The pixel whose centre is nearest (pixel i spans i − ½ … i + ½)."""
+    return np.floor(coord + 0.5).astype(np.int64)
+
+
+def corners_inside(inside: Callable[[np.ndarray], np.ndarray]) -> HoldsWhole:
+    """A voxel test from a point test: all eight corners inside."""
+    return lambda corners: inside(corners.reshape(-1, 3)).reshape(len(corners), 8).all(axis=1)
 
 
 def whole_voxel_mask(points_base: np.ndarray, T_loc_base: np.ndarray, voxel_m: float,
-                     inside: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+                     holds_whole: HoldsWhole) -> np.ndarray:
     """(N,) whether each base-frame point falls in a voxel of the `loc` grid (edge `voxel_m`,
-    the registration map's) whose eight corners all lie inside the view, with the base at
-    `T_loc_base` and `inside` the view's test on base-frame points."""
+    the registration map's) that the view holds whole, with the base at `T_loc_base`."""
     if len(points_base) == 0:
         return np.zeros(0, bool)
     if voxel_m <= 0:
@@ -57,8 +94,7 @@ def whole_voxel_mask(points_base: np.ndarray, T_loc_base: np.ndarray, voxel_m: f
     idx = np.floor(transform_points(T_loc_base, points_base) / voxel_m).astype(np.int64)
     keys = ((idx[:, 0] + _OFFSET) << (2 * _BITS)) | ((idx[:, 1] + _OFFSET) << _BITS) \
         | (idx[:, 2] + _OFFSET)
-    unique_keys, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+    _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
     corners_loc = (idx[first][:, None, :] + _CORNERS[None]).reshape(-1, 3) * voxel_m
-    seen = inside(transform_points(invert(T_loc_base), corners_loc))
-    whole = seen.reshape(len(unique_keys), 8).all(axis=1)
-    return whole[inverse.ravel()]
+    corners_base = transform_points(invert(T_loc_base), corners_loc).reshape(-1, 8, 3)
+    return holds_whole(corners_base)[inverse.ravel()]
