@@ -19,11 +19,10 @@ import numpy as np
 
 from services.common.geometry import invert, transform_points
 
-_CORNERS = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
-# voxel keys packed into one int64: 21 bits per axis, offset so negative indices stay positive
-_BITS, _OFFSET = 21, 1 << 20
+_CORNERS = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float) - 0.5
 
-HoldsWhole = Callable[[np.ndarray], np.ndarray]  # (M, 8, 3) base-frame corners → (M,) bool
+# (N, 3) base-frame voxel centres and the voxel edge (m) → (N,) bool: seen whole
+HoldsWhole = Callable[[np.ndarray, float], np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -38,37 +37,29 @@ class CameraView:
     T_base_cam: np.ndarray  # (4, 4) optical frame (x right, y down, z forward) → base
     valid: np.ndarray | None = None  # (height, width) bool: the pixel has a return
 
-    def _pixels(self, points_base: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(u, v, depth) of base-frame points; depth ≤ 0 behind the camera."""
-        p = transform_points(invert(self.T_base_cam), points_base)
-        z = p[:, 2]
-        zs = np.where(z > 1e-6, z, 1.0)
-        return self.K[0, 0] * p[:, 0] / zs + self.K[0, 2], \
-            self.K[1, 1] * p[:, 1] / zs + self.K[1, 2], z
-
-    def contains(self, points_base: np.ndarray) -> np.ndarray:
-        """(N,) whether each base-frame point lies inside the view (occlusion aside)."""
-        u, v, z = self._pixels(points_base)
-        # pixel centres run 0 … W−1: a corner beyond the outermost centres is not seen
-        return (z > 1e-6) & (z <= self.range_m) & (u >= 0) & (u <= self.width - 1) \
-            & (v >= 0) & (v <= self.height - 1)
-
-    def holds_whole(self, corners_base: np.ndarray) -> np.ndarray:
-        """(M,) whether each voxel (its (M, 8, 3) base-frame corners) was seen whole: all its
-        corners inside the view and, with `valid`, a return at every pixel of its image
-        footprint (the far ones lost to range, grazing angles or the DRF cut it too; then
-        the corners need only be in front, inside the image)."""
-        m = len(corners_base)
+    def holds_whole(self, centres_base: np.ndarray, voxel_m: float) -> np.ndarray:
+        """(N,) whether each voxel (base-frame centre, edge `voxel_m`) was seen whole: its
+        bounding sphere in front of the camera, in range, its image footprint (the sphere's
+        square) inside the image and, with `valid`, a return at every pixel of it (the far
+        ones lost to range, grazing angles or the DRF cut a voxel too). A sphere, not the
+        eight corners: one projection per voxel, and only slightly stricter."""
+        c = transform_points(invert(self.T_base_cam), centres_base)
+        z = c[:, 2]
+        radius = 0.5 * np.sqrt(3.0) * voxel_m
+        ok = (z > radius + 1e-3) & (z + radius <= self.range_m)
+        zs = np.where(ok, z, 1.0)
+        fx, fy = self.K[0, 0], self.K[1, 1]
+        u, v = fx * c[:, 0] / zs + self.K[0, 2], fy * c[:, 1] / zs + self.K[1, 2]
+        # the sphere's image spans r·f/(z − r) either side of the centre's, at most
+        du, dv = radius * fx / (zs - radius), radius * fy / (zs - radius)
+        c0, c1 = _pixel_index(u - du), _pixel_index(u + du)
+        r0, r1 = _pixel_index(v - dv), _pixel_index(v + dv)
+        ok &= (c0 >= 0) & (c1 <= self.width - 1) & (r0 >= 0) & (r1 <= self.height - 1)
         if self.valid is None:
-            return self.contains(corners_base.reshape(-1, 3)).reshape(m, 8).all(axis=1)
-        u, v, z = (a.reshape(m, 8) for a in self._pixels(corners_base.reshape(-1, 3)))
-        ok = ((z > 1e-6) & (u >= 0) & (u <= self.width - 1) & (v >= 0)
-              & (v <= self.height - 1)).all(axis=1)
-        c0, c1 = _pixel_index(u.min(axis=1)), _pixel_index(u.max(axis=1))
-        r0, r1 = _pixel_index(v.min(axis=1)), _pixel_index(v.max(axis=1))
+            return ok
         c0, c1, r0, r1 = (np.where(ok, a, 0) for a in (c0, c1, r0, r1))
-        holes = np.zeros((self.height + 1, self.width + 1), np.int64)
-        holes[1:, 1:] = np.cumsum(np.cumsum(~self.valid, axis=0), axis=1)
+        holes = np.zeros((self.height + 1, self.width + 1), np.int32)
+        holes[1:, 1:] = np.cumsum(np.cumsum(~self.valid, axis=0, dtype=np.int32), axis=1)
         missing = holes[r1 + 1, c1 + 1] - holes[r0, c1 + 1] - holes[r1 + 1, c0] + holes[r0, c0]
         return ok & (missing == 0)
 
@@ -79,8 +70,12 @@ def _pixel_index(coord: np.ndarray) -> np.ndarray:
 
 
 def corners_inside(inside: Callable[[np.ndarray], np.ndarray]) -> HoldsWhole:
-    """A voxel test from a point test: all eight corners inside."""
-    return lambda corners: inside(corners.reshape(-1, 3)).reshape(len(corners), 8).all(axis=1)
+    """A voxel test from a point test on base-frame points: all eight corners inside (the
+    voxel's edges taken along the base frame's axes, as for a map aligned with it)."""
+    def holds_whole(centres_base: np.ndarray, voxel_m: float) -> np.ndarray:
+        corners = centres_base[:, None, :] + voxel_m * _CORNERS[None]
+        return inside(corners.reshape(-1, 3)).reshape(len(centres_base), 8).all(axis=1)
+    return holds_whole
 
 
 def whole_voxel_mask(points_base: np.ndarray, T_loc_base: np.ndarray, voxel_m: float,
@@ -91,10 +86,5 @@ def whole_voxel_mask(points_base: np.ndarray, T_loc_base: np.ndarray, voxel_m: f
         return np.zeros(0, bool)
     if voxel_m <= 0:
         raise ValueError(f"voxel_m must be > 0, got {voxel_m}")
-    idx = np.floor(transform_points(T_loc_base, points_base) / voxel_m).astype(np.int64)
-    keys = ((idx[:, 0] + _OFFSET) << (2 * _BITS)) | ((idx[:, 1] + _OFFSET) << _BITS) \
-        | (idx[:, 2] + _OFFSET)
-    _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
-    corners_loc = (idx[first][:, None, :] + _CORNERS[None]).reshape(-1, 3) * voxel_m
-    corners_base = transform_points(invert(T_loc_base), corners_loc).reshape(-1, 8, 3)
-    return holds_whole(corners_base)[inverse.ravel()]
+    centres_loc = (np.floor(transform_points(T_loc_base, points_base) / voxel_m) + 0.5) * voxel_m
+    return holds_whole(transform_points(invert(T_loc_base), centres_loc), voxel_m)
