@@ -128,6 +128,7 @@ class StageTimer:
 def instrument(core: AgentCore, timer: StageTimer) -> None:
     """Time the agent's stages (names as in the docs' table) on this core instance."""
     for attr, name in (("_filtered_points", "DRF + depth to points"),
+                       ("_whole_voxels", "registration: whole voxels"),
                        ("_register", "registration (localization)"),
                        ("_integrate", "submap + grid integration")):
         setattr(core, attr, timer.wrap(name, getattr(core, attr)))
@@ -162,9 +163,12 @@ def robot_inputs(keys: Keys, robot: int, path: Path) -> Iterator[tuple[str, str,
             yield kind, key, payload
 
 
-def replay(rec: Path, robot: int, limit: int | None) -> tuple[StageTimer, dict, list[str]]:
-    """(timer, mismatches per output topic, outputs as published) of one robot's replay."""
-    config = load_config(rec / "run" / "config.yaml", {})
+def replay(rec: Path, robot: int, limit: int | None, overrides: dict[str, str] | None = None,
+           ) -> tuple[StageTimer, dict, list[str]]:
+    """(timer, mismatches per output topic, outputs as published) of one robot's replay;
+    `overrides` (dotted config keys) change the agent from the recorded mission's, so its
+    outputs differ and the inputs, being the mission's, are open loop."""
+    config = load_config(rec / "run" / "config.yaml", overrides or {})
     keys = Keys(config.bus.prefix)
     core = AgentCore(config.agent, robot, config.sim.tick_s, team_size=config.sim.robots - 1)
     timer = StageTimer()
@@ -261,6 +265,9 @@ def main() -> None:
     p.add_argument("--ticks", type=int, default=None, help="stop after this many ticks")
     p.add_argument("--check", action="store_true", help="compare outputs with the mission's")
     p.add_argument("--profile", action="store_true", help="cProfile the replay")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="config override (repeatable), e.g. agent.reg_whole_voxels=pixels: the "
+                   "stage costs of another setting on the same inputs (open loop)")
     args = ap.parse_args()
     if args.cmd == "record":
         record(args.out, [a for a in args.run_args if a != "--"])
@@ -268,7 +275,8 @@ def main() -> None:
     prof = cProfile.Profile() if args.profile else None
     if prof is not None:
         prof.enable()
-    timer, mismatches, counts = replay(args.rec, args.robot, args.ticks)
+    overrides = dict(kv.split("=", 1) for kv in args.set)
+    timer, mismatches, counts = replay(args.rec, args.robot, args.ticks, overrides)
     if prof is not None:
         prof.disable()
         stats = pstats.Stats(prof).strip_dirs()

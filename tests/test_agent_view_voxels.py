@@ -23,25 +23,26 @@ def test_the_camera_view_holds_what_the_image_and_range_hold() -> None:
                             [-1.0, 0.0, 0.2],  # behind
                             [1.0, 1.5, 0.2],  # left of the 90° image (45° half angle)
                             [1.0, 0.9, 0.2]])  # just inside it
-    assert VIEW.holds_whole(points_base, 0.01).tolist() == [True, False, False, False, True]
+    corners_at = np.zeros((8, 3))  # a point as a voxel of no size
+    assert VIEW.holds_whole(points_base, corners_at).tolist() == [True, False, False, False, True]
 
 
 def test_points_of_voxels_the_range_cuts_are_left_out() -> None:
-    # a wall across the view at 4.9 m: its 5 cm voxels (4.90-4.95) lie within the 5 m range,
-    # with their bounding spheres; a wall at 4.98 m sits in voxels (4.95-5.00) the range cuts
+    # a wall across the view at 4.98 m: its 5 cm voxels span 4.95-5.00 (whole) and a row of
+    # points at 5.02 m would sit in 5.00-5.05 voxels, cut by the 5 m range
     y, z = np.meshgrid(np.linspace(-0.5, 0.5, 21), np.linspace(0.1, 0.5, 9))
-    wall = np.stack([np.full(y.size, 4.9), y.ravel(), z.ravel()], axis=1)
-    beyond = wall + [0.08, 0.0, 0.0]
+    wall = np.stack([np.full(y.size, 4.98), y.ravel(), z.ravel()], axis=1)
+    beyond = wall + [0.04, 0.0, 0.0]
     mask = whole_voxel_mask(np.concatenate([wall, beyond]), np.eye(4), 0.05, VIEW.holds_whole)
     assert mask[: len(wall)].all() and not mask[len(wall):].any()
 
 
 def test_the_voxel_grid_is_the_map_frame_s() -> None:
-    # the same base-frame point, with the base 1 cm further on: its map voxel is the next one
-    # out, which the range cuts
-    point = np.array([[4.94, 0.0, 0.22]])
+    # the same base-frame point, with the base 3 cm further on: its map voxel moves across the
+    # range's edge
+    point = np.array([[4.97, 0.0, 0.22]])
     assert whole_voxel_mask(point, np.eye(4), 0.05, VIEW.holds_whole).all()
-    assert not whole_voxel_mask(point, T_from_xyyaw(0.01, 0.0, 0.0), 0.05, VIEW.holds_whole).any()
+    assert not whole_voxel_mask(point, T_from_xyyaw(0.03, 0.0, 0.0), 0.05, VIEW.holds_whole).any()
 
 
 def test_a_voxel_over_pixels_without_a_return_is_cut() -> None:

@@ -20,9 +20,12 @@ import numpy as np
 from services.common.geometry import invert, transform_points
 
 _CORNERS = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float) - 0.5
+# voxel keys packed into one int64: 21 bits per axis, offset so negative indices stay positive
+_BITS, _OFFSET = 21, 1 << 20
 
-# (N, 3) base-frame voxel centres and the voxel edge (m) → (N,) bool: seen whole
-HoldsWhole = Callable[[np.ndarray, float], np.ndarray]
+# (M, 3) base-frame voxel centres and the (8, 3) base-frame offsets of a voxel's corners from
+# its centre → (M,) bool: seen whole
+HoldsWhole = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -37,26 +40,26 @@ class CameraView:
     T_base_cam: np.ndarray  # (4, 4) optical frame (x right, y down, z forward) → base
     valid: np.ndarray | None = None  # (height, width) bool: the pixel has a return
 
-    def holds_whole(self, centres_base: np.ndarray, voxel_m: float) -> np.ndarray:
-        """(N,) whether each voxel (base-frame centre, edge `voxel_m`) was seen whole: its
-        bounding sphere in front of the camera, in range, its image footprint (the sphere's
-        square) inside the image and, with `valid`, a return at every pixel of it (the far
-        ones lost to range, grazing angles or the DRF cut a voxel too). A sphere, not the
-        eight corners: one projection per voxel, and only slightly stricter."""
-        c = transform_points(invert(self.T_base_cam), centres_base)
-        z = c[:, 2]
-        radius = 0.5 * np.sqrt(3.0) * voxel_m
-        ok = (z > radius + 1e-3) & (z + radius <= self.range_m)
-        zs = np.where(ok, z, 1.0)
-        fx, fy = self.K[0, 0], self.K[1, 1]
-        u, v = fx * c[:, 0] / zs + self.K[0, 2], fy * c[:, 1] / zs + self.K[1, 2]
-        # the sphere's image spans r·f/(z − r) either side of the centre's, at most
-        du, dv = radius * fx / (zs - radius), radius * fy / (zs - radius)
-        c0, c1 = _pixel_index(u - du), _pixel_index(u + du)
-        r0, r1 = _pixel_index(v - dv), _pixel_index(v + dv)
-        ok &= (c0 >= 0) & (c1 <= self.width - 1) & (r0 >= 0) & (r1 <= self.height - 1)
+    def holds_whole(self, centres_base: np.ndarray, offsets_base: np.ndarray) -> np.ndarray:
+        """(M,) whether each voxel was seen whole: its eight corners in front of the camera,
+        inside the image and either within the range or, with `valid`, over a footprint
+        (the corners' pixel box) where every pixel has a return (the far ones lost to range,
+        grazing angles or the DRF cut a voxel too)."""
+        T_cam_base = invert(self.T_base_cam)
+        corners = (transform_points(T_cam_base, centres_base)[:, None, :]
+                   + (offsets_base @ T_cam_base[:3, :3].T)[None])
+        z = corners[..., 2]
+        zs = np.where(z > 1e-6, z, 1.0)
+        u = self.K[0, 0] * corners[..., 0] / zs + self.K[0, 2]
+        v = self.K[1, 1] * corners[..., 1] / zs + self.K[1, 2]
+        # pixel centres run 0 … W−1: a corner beyond the outermost centres is not seen
+        inside = (z > 1e-6) & (u >= 0) & (u <= self.width - 1) & (v >= 0) \
+            & (v <= self.height - 1)
         if self.valid is None:
-            return ok
+            return (inside & (z <= self.range_m + 1e-9)).all(axis=1)
+        ok = inside.all(axis=1)
+        c0, c1 = _pixel_index(u.min(axis=1)), _pixel_index(u.max(axis=1))
+        r0, r1 = _pixel_index(v.min(axis=1)), _pixel_index(v.max(axis=1))
         c0, c1, r0, r1 = (np.where(ok, a, 0) for a in (c0, c1, r0, r1))
         holes = np.zeros((self.height + 1, self.width + 1), np.int32)
         holes[1:, 1:] = np.cumsum(np.cumsum(~self.valid, axis=0, dtype=np.int32), axis=1)
@@ -70,10 +73,9 @@ def _pixel_index(coord: np.ndarray) -> np.ndarray:
 
 
 def corners_inside(inside: Callable[[np.ndarray], np.ndarray]) -> HoldsWhole:
-    """A voxel test from a point test on base-frame points: all eight corners inside (the
-    voxel's edges taken along the base frame's axes, as for a map aligned with it)."""
-    def holds_whole(centres_base: np.ndarray, voxel_m: float) -> np.ndarray:
-        corners = centres_base[:, None, :] + voxel_m * _CORNERS[None]
+    """A voxel test from a test on base-frame points: all eight corners inside."""
+    def holds_whole(centres_base: np.ndarray, offsets_base: np.ndarray) -> np.ndarray:
+        corners = centres_base[:, None, :] + offsets_base[None]
         return inside(corners.reshape(-1, 3)).reshape(len(centres_base), 8).all(axis=1)
     return holds_whole
 
@@ -86,5 +88,10 @@ def whole_voxel_mask(points_base: np.ndarray, T_loc_base: np.ndarray, voxel_m: f
         return np.zeros(0, bool)
     if voxel_m <= 0:
         raise ValueError(f"voxel_m must be > 0, got {voxel_m}")
-    centres_loc = (np.floor(transform_points(T_loc_base, points_base) / voxel_m) + 0.5) * voxel_m
-    return holds_whole(transform_points(invert(T_loc_base), centres_loc), voxel_m)
+    idx = np.floor(transform_points(T_loc_base, points_base) / voxel_m).astype(np.int64)
+    keys = ((idx[:, 0] + _OFFSET) << (2 * _BITS)) | ((idx[:, 1] + _OFFSET) << _BITS) \
+        | (idx[:, 2] + _OFFSET)
+    _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+    centres_base = transform_points(invert(T_loc_base), (idx[first] + 0.5) * voxel_m)
+    offsets_base = (voxel_m * _CORNERS) @ T_loc_base[:3, :3]  # loc axes, in the base frame
+    return holds_whole(centres_base, offsets_base)[inverse.ravel()]
