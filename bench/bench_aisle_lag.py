@@ -6,7 +6,9 @@ perfect odometry; each frame is registered against the agent's registration voxe
 (`FrameRegistrar`) from the odometry guess and joins the map at the pose found, so a bias per
 registration adds up along the chain (docs/agent.md, "Along the aisles"). Variants align only
 the points within a range (`agent.reg_align_max_range_m`) and/or a bearing margin inside the
-field of view; the frame always joins the map whole. Printed: the chain's final along-track
+field of view (the frame always joins the map whole), or keep, aligned and mapped, only the
+points whose downsampling cell or registration-map voxel the view holds whole
+(`agent.reg_whole_voxels`). Printed: the chain's final along-track
 error per seed (negative: it lags), and the median.
 
     .venv/bin/python bench/bench_aisle_lag.py --seeds 10
