@@ -87,6 +87,18 @@ def test_corridor_keeps_odometry_along_the_aisle() -> None:
     assert np.linalg.cond(room[:2, :2]) < 20  # a closed room constrains both directions
 
 
+def test_a_higher_inflation_power_weakens_only_the_weak_direction() -> None:
+    yaw = math.radians(30)
+    H = _hessian(_corridor(np.random.default_rng(0)), T_from_xyyaw(0.0, 0.0, yaw))
+    w1 = np.linalg.eigvalsh(measurement_cov(H, yaw, PARAMS)[:2, :2])
+    w2 = np.linalg.eigvalsh(measurement_cov(
+        H, yaw, replace(PARAMS, weak_inflation_power=2.0))[:2, :2])
+    assert abs(w2[0] - w1[0]) < 1e-9 * w1[0] + 1e-12  # across the aisle: as before
+    ratio = w1[1] / w1[0]
+    assert w2[1] / w2[0] > 0.9 * min(ratio**2, PARAMS.max_weak_inflation)  # along: squared
+    assert w2[1] / w2[0] <= PARAMS.max_weak_inflation * (1 + 1e-9)
+
+
 def test_filtered_localizer_removes_drift_and_ignores_a_slide() -> None:
     rng = np.random.default_rng(2)
     room = _room(rng)

@@ -8,7 +8,10 @@ import numpy as np
 import small_gicp
 
 from services.common.geometry import T_from_xyyaw, invert, transform_points, xyyaw_from_T
-from services.robot_agent.drift_filter import drop_weak_translation
+from services.robot_agent.drift_filter import (
+    drop_weak_translation,
+    translation_information_ratio,
+)
 from services.robot_agent.localization import Localizer
 from services.robot_agent.registrar import RegistrationParams
 
@@ -64,6 +67,15 @@ def test_step_in_a_closed_room_is_kept() -> None:
     H = _hessian(_room(rng), T_from_xyyaw(0.5, 0.3, 0.4))
     step = np.array([0.04, -0.03, 0.01])
     assert np.array_equal(drop_weak_translation(step, H, 0.05), step)
+
+
+def test_translation_information_is_lopsided_in_a_corridor_only() -> None:
+    corridor = translation_information_ratio(
+        _hessian(_corridor(np.random.default_rng(0)), T_from_xyyaw(0.0, 0.0, 0.5)))
+    room = translation_information_ratio(
+        _hessian(_room(np.random.default_rng(1)), T_from_xyyaw(0.5, 0.3, 0.4)))
+    assert corridor < 0.05 < room <= 1.0
+    assert translation_information_ratio(np.zeros((6, 6))) == 0.0  # nothing measured
 
 
 def test_localizer_removes_odometry_drift_in_a_room() -> None:

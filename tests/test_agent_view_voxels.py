@@ -1,13 +1,31 @@
-"""Registration keeps the points of the map voxels the view saw whole (view_voxels.py)."""
+"""Registration keeps the points of the map voxels the view saw whole (view_voxels.py), in
+the agent only while its registrations are lopsided when asked."""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import pytest
 
+from schemas.messages import RgbdFrame
 from services.common.geometry import T_from_xyyaw, xyyaw_from_T
+from services.robot_agent.agent import AgentCore
+from services.robot_agent.config import AgentConfig
+from services.robot_agent.projection import (
+    T_base_cam_forward,
+    cam_to_base,
+    depth_to_points,
+    intrinsics,
+)
 from services.robot_agent.registrar import FrameRegistrar, RegistrationParams
-from services.robot_agent.synthetic import aisle_frame, aisle_points
+from services.robot_agent.synthetic import (
+    BoxWorld,
+    T_world_cam_of,
+    aisle_frame,
+    aisle_points,
+    render,
+)
 from services.robot_agent.view_voxels import CameraView, corners_inside, whole_voxel_mask
 
 # a forward camera 0.2 m up: optical z along base x, optical x along −base y, y along −z
@@ -57,6 +75,22 @@ def test_a_voxel_over_pixels_without_a_return_is_cut() -> None:
     assert mask[wall[:, 1] > 0.05].all() and not mask[wall[:, 1] < 0.0].any()
 
 
+def test_the_bounding_sphere_is_stricter_at_the_range() -> None:
+    # a voxel whose corners lie within the 5 m range but whose bounding sphere (radius
+    # √3/2 · 5 cm ≈ 4.3 cm) reaches past it
+    valid = np.ones((120, 160), bool)
+    corners = CameraView(K, 160, 120, 5.0, T_BASE_CAM, valid)
+    sphere = CameraView(K, 160, 120, 5.0, T_BASE_CAM, valid, sphere=True)
+    near, edge = np.array([[4.0, 0.0, 0.22]]), np.array([[4.97, 0.0, 0.22]])
+    shift = T_from_xyyaw(0.0, 0.0, 0.0)
+    assert whole_voxel_mask(edge, shift, 0.05, corners.holds_whole).all()
+    assert not whole_voxel_mask(edge, shift, 0.05, sphere.holds_whole).any()
+    assert whole_voxel_mask(near, shift, 0.05, sphere.holds_whole).all()
+    valid[:, :] = False  # no returns at all: nothing is whole either way
+    none = CameraView(K, 160, 120, 5.0, T_BASE_CAM, valid, sphere=True)
+    assert not whole_voxel_mask(near, shift, 0.05, none.holds_whole).any()
+
+
 def test_bad_input_is_refused_or_empty() -> None:
     assert whole_voxel_mask(np.empty((0, 3)), np.eye(4), 0.05, VIEW.holds_whole).shape == (0,)
     with pytest.raises(ValueError, match="voxel_m"):
@@ -93,3 +127,23 @@ def test_whole_voxels_take_most_of_the_lag_out_of_an_aisle() -> None:
     every, whole = _lag_over_6_m(False), _lag_over_6_m(True)
     assert every < -0.02  # all points: the chain lags 2-3 cm over 6 m
     assert abs(whole) < 0.6 * abs(every)
+
+
+def test_the_agent_cuts_only_while_its_registrations_are_lopsided() -> None:
+    K_, T_ = intrinsics(160, 120, math.radians(84.1)), T_base_cam_forward(0.35)
+    world = BoxWorld.room(-3.0, 7.0, -1.2, 1.2)  # a corridor longer than the range
+    depth, rgb = render(world, K_, (120, 160), T_world_cam_of(0.0, 0.0, 0.0, T_), 5.0)
+    frame = RgbdFrame(robot_id=0, tick=0, stamp_ns=0, depth_m=depth, rgb=rgb, K=K_,
+                      T_base_cam=T_, range_max_m=5.0)
+    points_base = cam_to_base(depth_to_points(depth, K_).points_cam, T_)
+    core = AgentCore(AgentConfig(reg_whole_voxels="sphere", reg_whole_voxels_below_ratio=0.05),
+                     0, 0.1)
+    kept = {}
+    for ratio in (1.0, 0.5, 0.01):
+        core.localizer.info_ratio = ratio
+        kept[ratio] = len(core._whole_voxels(points_base, frame, np.eye(4)))
+    assert kept[1.0] == kept[0.5] == len(points_base)  # well held: every point registers
+    assert 0.5 * len(points_base) < kept[0.01] < len(points_base)  # the cut layer goes
+    always = AgentCore(AgentConfig(reg_whole_voxels="sphere"), 0, 0.1)
+    always.localizer.info_ratio = 1.0
+    assert len(always._whole_voxels(points_base, frame, np.eye(4))) == kept[0.01]

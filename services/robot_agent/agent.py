@@ -336,17 +336,17 @@ class AgentCore:
                       T_loc_base: np.ndarray) -> np.ndarray:
         """The points to register: with `reg_whole_voxels`, those whose registration-map voxel
         the frame saw whole at the odometry guess (the mapping keeps them all)."""
-        mode = self.config.reg_whole_voxels
-        if mode == "off":
+        mode, below = self.config.reg_whole_voxels, self.config.reg_whole_voxels_below_ratio
+        if mode == "off" or (below < 1 and self.localizer.info_ratio >= below):
             return points_base
         depth = frame.depth_m
         valid = None
-        if mode == "pixels":
+        if mode in ("pixels", "sphere"):
             valid = np.isfinite(depth) & (depth > 0) & (depth <= frame.range_max_m)
             if self.last_drf is not None and self.last_drf.tick == frame.tick:
                 valid &= ~self.last_drf.mask
         view = CameraView(frame.K, depth.shape[1], depth.shape[0], frame.range_max_m,
-                          frame.T_base_cam, valid)
+                          frame.T_base_cam, valid, sphere=mode == "sphere")
         return points_base[whole_voxel_mask(points_base, T_loc_base,
                                             self.config.reg_map_voxel_m, view.holds_whole)]
 

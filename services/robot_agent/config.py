@@ -182,6 +182,10 @@ class AgentConfig(BaseModel):
         default=0.005, gt=0, description="σ of one registration along its strong directions, m")
     reg_sigma_rad: float = Field(
         default=0.002, gt=0, description="σ of one registration's yaw, rad")
+    reg_weak_inflation_power: float = Field(
+        default=1.0, ge=1, le=3, description="a registration's σ² along a weaker direction "
+        "grows by its information ratio to the strongest, to this power (2: along an aisle, "
+        "where the view's edges pull frames back, the wheels count for more)")
     reg_coupled_length_m: float = Field(
         default=0.0, ge=0, description="> 0: a registration's covariance from its whole planar "
         "information, yaw compared at this lever arm (drift_filter.measurement_cov)")
@@ -215,12 +219,17 @@ class AgentConfig(BaseModel):
         default=0.0, ge=0, lt=90, description="... and within this bearing of straight ahead "
         "(base frame, deg; 0 = all): the view's side edges pull back too (docs/agent.md, "
         "'Both edges of the view pull back')")
-    reg_whole_voxels: Literal["off", "view", "pixels"] = Field(
+    reg_whole_voxels: Literal["off", "view", "pixels", "sphere"] = Field(
         default="off", description="register (and map for registration) only the points "
         "whose registration-map voxel the frame saw whole: a voxel the view cuts holds its "
         "inner part only and pulls the next frames back (view_voxels.py). 'view': all the "
         "voxel's corners inside the image and the range; 'pixels': inside the image, with a "
-        "return at every pixel of its footprint (cuts by range, grazing angles, the DRF)")
+        "return at every pixel of its footprint (cuts by range, grazing angles, the DRF); "
+        "'sphere': as 'pixels' for the voxel's bounding sphere, its far side within range")
+    reg_whole_voxels_below_ratio: float = Field(
+        default=1.0, gt=0, le=1, description="... only while the last registration's "
+        "weakest / strongest translation information is below this (an aisle or one wall: "
+        "~0.01; 1 = always)")
     odom_calibration_prior_segments: float = Field(
         default=2.0, ge=0, description="the calibration's prior at 'no error' weighs this many "
         "1 m segments (fewer: learned sooner, trusting the first segments more)")

@@ -35,6 +35,9 @@ class FilterParams:
     r_m: float = 0.005
     r_rad: float = 0.002
     max_weak_inflation: float = 1e4  # σ² along a degenerate direction grows by at most this
+    # σ² along a weaker direction grows by (strongest / its information) to this power: above
+    # 1 a registration's weak direction (along an aisle) counts for less against the wheels
+    weak_inflation_power: float = 1.0
     chi2_gate: float = 16.27  # 3 dof, p = 0.999
     coupled_length_m: float = 0.0  # > 0: R from the whole planar information (see below)
     # re-acquisition: this many gate-rejected registrations in a row (0 = never) that agree
@@ -87,7 +90,8 @@ def measurement_cov(H6: np.ndarray | None, yaw: float, params: FilterParams) -> 
         H = np.asarray(H6)[np.ix_([3, 4, 2], [3, 4, 2])]
         if H[2, 2] > 0:
             Ht = H[:2, :2] - np.outer(H[:2, 2], H[2, :2]) / H[2, 2]
-            R_t = _inflated(Ht, params.r_m**2, params.max_weak_inflation)
+            R_t = _inflated(Ht, params.r_m**2, params.max_weak_inflation,
+                            params.weak_inflation_power)
     rot = _rot(yaw)
     out = np.zeros((3, 3))
     out[:2, :2] = rot @ R_t @ rot.T
@@ -115,19 +119,22 @@ def _coupled_cov(H6: np.ndarray, yaw: float, params: FilterParams) -> np.ndarray
     L = params.coupled_length_m
     S = np.diag([1.0, 1.0, 1.0 / L])  # (x, y, yaw) = S · (x, y, L·yaw)
     Hn = np.linalg.inv(S) @ Hp @ np.linalg.inv(S)  # information in (x, y, L·yaw)
-    Rn = _inflated(Hn, params.r_m**2, params.max_weak_inflation)
+    Rn = _inflated(Hn, params.r_m**2, params.max_weak_inflation, params.weak_inflation_power)
     R_body = S @ Rn @ S
     T = np.eye(3)
     T[:2, :2] = _rot(yaw)
     return T @ R_body @ T.T
 
 
-def _inflated(H: np.ndarray, sigma2: float, max_inflation: float) -> np.ndarray:
-    """σ² in every direction, times (strongest / this) information along each eigenvector."""
+def _inflated(H: np.ndarray, sigma2: float, max_inflation: float,
+              power: float = 1.0) -> np.ndarray:
+    """σ² in every direction, times (strongest / this) information along each eigenvector,
+    to `power`, at most `max_inflation`."""
     w, V = np.linalg.eigh(0.5 * (H + H.T))
     if w[-1] <= 0:
         return np.eye(len(w)) * sigma2 * max_inflation
     ratio = np.clip(w[-1] / np.maximum(w, w[-1] / max_inflation), 1.0, max_inflation)
+    ratio = np.minimum(ratio**power, max_inflation)
     return V @ np.diag(sigma2 * ratio) @ V.T
 
 
@@ -205,19 +212,37 @@ def _relative(xyyaw_from: np.ndarray, xyyaw_to: np.ndarray) -> tuple[float, floa
     return c * wx + s * wy, -s * wx + c * wy, float(wrap_angle(xyyaw_to[2] - xyyaw_from[2]))
 
 
+def _translation_information(H6: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Eigenvalues (ascending) and eigenvectors of GICP's planar translation information once
+    yaw is marginalised out (Schur complement; small_gicp orders rx, ry, rz, tx, ty, tz,
+    body-frame perturbation), or None without yaw information."""
+    H = np.asarray(H6)[np.ix_([3, 4, 2], [3, 4, 2])]
+    if H[2, 2] <= 0:
+        return None
+    Ht = H[:2, :2] - np.outer(H[:2, 2], H[2, :2]) / H[2, 2]
+    return np.linalg.eigh(0.5 * (Ht + Ht.T))
+
+
+def translation_information_ratio(H6: np.ndarray) -> float:
+    """Weakest / strongest planar translation information of a registration (1: as strong
+    along every direction; along an aisle or one wall, ~0.01)."""
+    info = _translation_information(H6)
+    if info is None or info[0][1] <= 0:
+        return 0.0
+    return float(max(info[0][0], 0.0) / info[0][1])
+
+
 def drop_weak_translation(step: np.ndarray, H6: np.ndarray, ratio: float) -> np.ndarray:
     """The (dx, dy, dyaw) body-frame step without its part along a degenerate direction.
 
-    GICP's Hessian (small_gicp orders rx, ry, rz, tx, ty, tz; body-frame perturbation) gives
-    the translation information once yaw is marginalised out (Schur complement). Between shelf
-    rows or along one wall it is a hundred times weaker along the aisle than across it, and
-    GICP then walks the pose along the aisle by ~2 cm a frame; odometry is the better guess
-    there (solution remapping, Zhang et al. ICRA 2016)."""
-    H = np.asarray(H6)[np.ix_([3, 4, 2], [3, 4, 2])]
-    if H[2, 2] <= 0:
+    Between shelf rows or along one wall the translation information
+    (`_translation_information`) is a hundred times weaker along the aisle than across it,
+    and GICP then walks the pose along the aisle by ~2 cm a frame; odometry is the better
+    guess there (solution remapping, Zhang et al. ICRA 2016)."""
+    info = _translation_information(H6)
+    if info is None:
         return step
-    Ht = H[:2, :2] - np.outer(H[:2, 2], H[2, :2]) / H[2, 2]
-    w, V = np.linalg.eigh(0.5 * (Ht + Ht.T))
+    w, V = info
     if w[1] <= 0 or w[0] >= ratio * w[1]:
         return step
     weak = V[:, 0]

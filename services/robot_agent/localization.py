@@ -25,6 +25,7 @@ from services.robot_agent.drift_filter import (
     measurement_cov,
     overlap_inflation,
     predict,
+    translation_information_ratio,
 )
 from services.robot_agent.odometry_calibration import (
     CalibratedOdometry,
@@ -54,6 +55,9 @@ class Localizer:
         self._T_odom_prev: np.ndarray | None = None
         self._wall_turn: tuple[float, float] | None = None  # this frame's (yaw before, after)
         self.n_held_out = 0  # unregistered frames in a row kept out of the map (σ too large)
+        # weakest / strongest translation information of the last frame GICP aligned (1 until
+        # one is): low along an aisle or one wall
+        self.info_ratio = 1.0
         # each rejected registration's T_loc_base and its frame's T_odom_base (x, y, yaw)
         self._rejected: list[tuple[np.ndarray, np.ndarray]] = []
         self.odometry = (CalibratedOdometry(params.calibration)
@@ -225,6 +229,7 @@ class Localizer:
                 reg.insert(cloud, guess)
             return RegistrationOutcome(guess, False, aligned)
         T_reg, H, inliers = aligned
+        self.info_ratio = translation_information_ratio(H)
         meas = np.array(xyyaw_from_T(T_reg))
         if self._sides_against_the_walls(meas[2]):
             reg.reset()

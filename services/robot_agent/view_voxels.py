@@ -40,31 +40,59 @@ class CameraView:
     T_base_cam: np.ndarray  # (4, 4) optical frame (x right, y down, z forward) → base
     valid: np.ndarray | None = None  # (height, width) bool: the pixel has a return
 
+    # the voxel's bounding sphere instead of its corners: its image square and its farthest
+    # depth (z + r) must be inside, a stricter cut (docs/agent.md, "Only voxels the view saw
+    # whole")
+    sphere: bool = False
+
     def holds_whole(self, centres_base: np.ndarray, offsets_base: np.ndarray) -> np.ndarray:
-        """(M,) whether each voxel was seen whole: its eight corners in front of the camera,
-        inside the image and either within the range or, with `valid`, over a footprint
-        (the corners' pixel box) where every pixel has a return (the far ones lost to range,
-        grazing angles or the DRF cut a voxel too)."""
+        """(M,) whether each voxel was seen whole: its eight corners (or bounding sphere) in
+        front of the camera, inside the image and either within the range or, with `valid`,
+        over a footprint (the corners' pixel box) where every pixel has a return (the far
+        ones lost to range, grazing angles or the DRF cut a voxel too)."""
         T_cam_base = invert(self.T_base_cam)
-        corners = (transform_points(T_cam_base, centres_base)[:, None, :]
-                   + (offsets_base @ T_cam_base[:3, :3].T)[None])
-        z = corners[..., 2]
-        zs = np.where(z > 1e-6, z, 1.0)
-        u = self.K[0, 0] * corners[..., 0] / zs + self.K[0, 2]
-        v = self.K[1, 1] * corners[..., 1] / zs + self.K[1, 2]
-        # pixel centres run 0 … W−1: a corner beyond the outermost centres is not seen
-        inside = (z > 1e-6) & (u >= 0) & (u <= self.width - 1) & (v >= 0) \
-            & (v <= self.height - 1)
+        if self.sphere:
+            ok, c0, c1, r0, r1 = self._sphere_box(transform_points(T_cam_base, centres_base),
+                                                  float(np.linalg.norm(offsets_base[0])))
+        else:
+            corners = (transform_points(T_cam_base, centres_base)[:, None, :]
+                       + (offsets_base @ T_cam_base[:3, :3].T)[None])
+            z = corners[..., 2]
+            zs = np.where(z > 1e-6, z, 1.0)
+            u = self.K[0, 0] * corners[..., 0] / zs + self.K[0, 2]
+            v = self.K[1, 1] * corners[..., 1] / zs + self.K[1, 2]
+            # pixel centres run 0 … W−1: a corner beyond the outermost centres is not seen
+            inside = (z > 1e-6) & (u >= 0) & (u <= self.width - 1) & (v >= 0) \
+                & (v <= self.height - 1)
+            if self.valid is None:
+                return (inside & (z <= self.range_m + 1e-9)).all(axis=1)
+            ok = inside.all(axis=1)
+            c0, c1 = _pixel_index(u.min(axis=1)), _pixel_index(u.max(axis=1))
+            r0, r1 = _pixel_index(v.min(axis=1)), _pixel_index(v.max(axis=1))
         if self.valid is None:
-            return (inside & (z <= self.range_m + 1e-9)).all(axis=1)
-        ok = inside.all(axis=1)
-        c0, c1 = _pixel_index(u.min(axis=1)), _pixel_index(u.max(axis=1))
-        r0, r1 = _pixel_index(v.min(axis=1)), _pixel_index(v.max(axis=1))
+            return ok
         c0, c1, r0, r1 = (np.where(ok, a, 0) for a in (c0, c1, r0, r1))
         holes = np.zeros((self.height + 1, self.width + 1), np.int32)
         holes[1:, 1:] = np.cumsum(np.cumsum(~self.valid, axis=0, dtype=np.int32), axis=1)
         missing = holes[r1 + 1, c1 + 1] - holes[r0, c1 + 1] - holes[r1 + 1, c0] + holes[r0, c0]
         return ok & (missing == 0)
+
+    def _sphere_box(self, centres_cam: np.ndarray, radius: float,
+                    ) -> tuple[np.ndarray, ...]:
+        """(ok, first column, last column, first row, last row): the pixel square of each
+        sphere's image, ok where it lies in front of the camera, in range and in the image."""
+        z = centres_cam[:, 2]
+        ok = (z > radius + 1e-3) & (z + radius <= self.range_m)
+        zs = np.where(ok, z, 1.0)
+        fx, fy = self.K[0, 0], self.K[1, 1]
+        u = fx * centres_cam[:, 0] / zs + self.K[0, 2]
+        v = fy * centres_cam[:, 1] / zs + self.K[1, 2]
+        # the sphere's image spans at most r·f/(z − r) either side of its centre's
+        du, dv = radius * fx / (zs - radius), radius * fy / (zs - radius)
+        c0, c1 = _pixel_index(u - du), _pixel_index(u + du)
+        r0, r1 = _pixel_index(v - dv), _pixel_index(v + dv)
+        ok &= (c0 >= 0) & (c1 <= self.width - 1) & (r0 >= 0) & (r1 <= self.height - 1)
+        return ok, c0, c1, r0, r1
 
 
 def _pixel_index(coord: np.ndarray) -> np.ndarray:
