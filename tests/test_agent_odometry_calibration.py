@@ -250,3 +250,84 @@ def test_pose_messages_carry_seven_finite_calibration_sums() -> None:
         with pytest.raises(ValueError):
             RobotPose(robot_id=1, tick=3, stamp_ns=300, pose_world=Pose2D(x=0, y=0, yaw=0),
                       odometry_stats=bad)
+
+
+def _learned_scale_against_a_map_that_pulls(frame_pairs: bool) -> float:
+    """Back and forth across a room on wheels that read 5 % long, with every registration
+    against the map reading each distance 1 % long too (as a map built on the uncorrected
+    wheels pulls a frame back toward them): the scale the localizer learns (no prior)."""
+    from services.common.geometry import T_from_xyyaw
+    from services.robot_agent.drift_filter import FilterParams
+    from services.robot_agent.localization import Localizer
+    from services.robot_agent.registrar import RegistrationParams
+    from tests.test_agent_localization import _room, _seen
+
+    room = _room(np.random.default_rng(4))
+    loc = Localizer(RegistrationParams(map_voxel_m=0.05, min_points=30, filter=FilterParams(),
+                                       calibration=CalibrationParams(frame_pairs=frame_pairs,
+                                                                     prior_segments=0.0)))
+    align = loc.registrar.align
+
+    def pulled(cloud, guess):  # noqa: ANN001, ANN202
+        out = align(cloud, guess)
+        if isinstance(out, str):
+            return out
+        T = out[0].copy()
+        T[0, 3] = -1.5 + 1.01 * (T[0, 3] + 1.5)
+        return T, out[1], out[2]
+
+    loc.registrar.align = pulled
+    raw = np.zeros(3)
+    true_prev = np.array([-1.5, 0.3, 0.0])
+    for k in range(241):
+        x = -1.5 + 0.1 * (k % 20 if (k // 20) % 2 == 0 else 20 - k % 20)
+        true = np.array([x, 0.3, 0.0])
+        raw = raw + 1.05 * (true - true_prev) if k else np.array([-1.5, 0.3, 0.0])
+        true_prev = true
+        loc.update(_seen(room, T_from_xyyaw(*true)), T_from_xyyaw(*raw))
+    assert loc.odometry.calibration.n_used >= 5
+    return loc.odometry.calibration.errors.scale
+
+
+def test_frame_pairs_learn_the_wheels_where_the_map_pulls_toward_them() -> None:
+    assert _learned_scale_against_a_map_that_pulls(frame_pairs=False) < 0.04
+    assert abs(_learned_scale_against_a_map_that_pulls(frame_pairs=True) - 0.05) < 0.003
+
+
+def test_a_frame_pair_locked_on_the_wrong_shelf_is_refused() -> None:
+    """The end frame aligned to the segment's first gives the true motion from a guess a
+    few centimetres off, and nothing from a guess further off than the map can be (a pair
+    that converged there would have jumped to another, identical shelf)."""
+    from services.common.geometry import T_from_xyyaw, invert, xyyaw_from_T
+    from services.robot_agent.localization import Localizer
+    from services.robot_agent.registrar import FrameRegistrar, RegistrationParams
+    from tests.test_agent_localization import _room, _seen
+
+    room = _room(np.random.default_rng(5))
+    reg = FrameRegistrar(RegistrationParams(min_points=30))
+    T_a, T_b = T_from_xyyaw(-1.0, 0.2, 0.1), T_from_xyyaw(0.0, 0.3, 0.3)
+    first = reg.cloud_tree(_seen(room, T_a))
+    cloud = reg.cloud_tree(_seen(room, T_b))[0]
+    truth = invert(T_a) @ T_b
+    params = CalibrationParams()
+    near = Localizer._pair_motion(first, cloud, truth @ T_from_xyyaw(0.03, -0.02, 0.01), params)
+    assert near is not None
+    assert np.allclose(xyyaw_from_T(near), xyyaw_from_T(truth), atol=5e-3)
+    assert Localizer._pair_motion(first, cloud, truth @ T_from_xyyaw(0.15, 0.0, 0.0),
+                                  params) is None
+
+
+def test_a_given_up_segment_opens_again_at_the_next_good_frame() -> None:
+    odo = CalibratedOdometry(CalibrationParams(segment_m=1.0))
+    assert not odo.due()  # no odometry yet
+    odo.observe(np.zeros(3))
+    assert odo.due() and odo.anchor_xyyaw is None
+    odo.registered(np.zeros(3))
+    odo.observe(np.array([0.5, 0.0, 0.0]))
+    assert not odo.due()
+    odo.observe(np.array([1.2, 0.0, 0.0]))
+    assert odo.due()
+    odo.drop_segment()
+    assert odo.anchor_xyyaw is None
+    odo.registered(np.array([1.18, 0.0, 0.0]))
+    assert odo.calibration.n_used == 0 and np.allclose(odo.anchor_xyyaw, [1.18, 0, 0])

@@ -247,6 +247,11 @@ class AgentConfig(BaseModel):
         default=10.0, ge=1, description="a registration ends a calibration segment only when "
         "its weakest translation direction is at most this many times weaker (variance) than "
         "its strongest")
+    odom_calibration_frame_pairs: bool = Field(
+        default=False, description="a calibration segment's motion from its end frame "
+        "aligned to its first, not from the two frames' poses against the map: the map the "
+        "end meets was built during the segment on the uncorrected wheels and pulls the end "
+        "back toward them (the fleet learned 1.7-1.96 % of the simulator's 2 %)")
     reg_min_points: int = Field(
         default=30, ge=10, description="points a frame needs (after 8 cm voxels) to register"
     )

@@ -29,6 +29,7 @@ from services.robot_agent.drift_filter import (
 )
 from services.robot_agent.odometry_calibration import (
     CalibratedOdometry,
+    CalibrationParams,
     is_good_registration,
 )
 from services.robot_agent.registrar import (
@@ -60,6 +61,8 @@ class Localizer:
         self.info_ratio = 1.0
         # each rejected registration's T_loc_base and its frame's T_odom_base (x, y, yaw)
         self._rejected: list[tuple[np.ndarray, np.ndarray]] = []
+        # the frame (cloud, k-d tree) the open calibration segment started at
+        self._segment_frame: tuple[small_gicp.PointCloud, small_gicp.KdTree] | None = None
         self.odometry = (CalibratedOdometry(params.calibration)
                          if params.calibration is not None and params.filter is not None
                          else None)
@@ -182,6 +185,47 @@ class Localizer:
         return T_odom_base, replace(filt, q_rad2=q_odom * q_scan / (q_odom + q_scan),
                                     q_rad2_per_rad=0.0, q_rad2_per_m=0.0)
 
+    def _calibrate(self, cloud: small_gicp.PointCloud, tree: small_gicp.KdTree,
+                   meas: np.ndarray) -> None:
+        """Close (or open) a calibration segment at this well-registered frame. With
+        `frame_pairs` its motion is the frame aligned to the segment's first; where that
+        alignment fails or is weak along a direction, the segment is given up and one opens
+        here."""
+        odometry = self.odometry
+        p = odometry.calibration.params
+        if not p.frame_pairs or not odometry.due():
+            odometry.registered(meas)
+            return
+        start = odometry.anchor_xyyaw
+        if start is not None and self._segment_frame is not None:
+            T_start = T_from_xyyaw(*start)
+            T_rel = self._pair_motion(self._segment_frame, cloud,
+                                      invert(T_start) @ T_from_xyyaw(*meas), p)
+            if T_rel is None:
+                odometry.drop_segment()
+            else:
+                meas = np.array(xyyaw_from_T(T_start @ T_rel))
+        odometry.registered(meas)
+        self._segment_frame = (cloud, tree)
+
+    @staticmethod
+    def _pair_motion(first: tuple[small_gicp.PointCloud, small_gicp.KdTree],
+                     cloud: small_gicp.PointCloud, guess: np.ndarray,
+                     p: CalibrationParams) -> np.ndarray | None:
+        """Planar T_first_cloud of a frame aligned to an earlier one (None: not converged,
+        too little overlap, a direction it cannot see, or far from the map's `guess`)."""
+        res = small_gicp.align(first[0], cloud, first[1], guess, registration_type="GICP",
+                               max_correspondence_distance=p.pair_max_corr_m, num_threads=1,
+                               max_iterations=p.pair_max_iterations,
+                               rotation_epsilon=1e-4, translation_epsilon=1e-4)
+        if not res.converged or res.num_inliers < p.min_inlier_frac * cloud.size() \
+                or translation_information_ratio(np.asarray(res.H)) < 1.0 / p.max_weak_ratio:
+            return None
+        dx, dy, dyaw = xyyaw_from_T(invert(guess) @ res.T_target_source)
+        if math.hypot(dx, dy) > p.pair_gate_m or abs(dyaw) > p.pair_gate_rad:
+            return None
+        return planar(res.T_target_source)
+
     def _sure_enough_to_insert(self) -> bool:
         """Whether an unregistered frame may join the map at the guess: its heading σ is
         within `unregistered_insert_max_sigma_rad`. A frame inserted 1.4° off (a turn behind
@@ -255,7 +299,7 @@ class Localizer:
         self.P = fusion.P
         if self.odometry is not None and is_good_registration(
                 inliers, R, self.odometry.calibration.params):
-            self.odometry.registered(meas)
+            self._calibrate(cloud, frame[1], meas)
         T = T_from_xyyaw(*fusion.xyyaw)
         if reg.moved_since_insert(T):
             reg.insert(cloud, T)

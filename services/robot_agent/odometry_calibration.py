@@ -64,6 +64,16 @@ class CalibrationParams:
     fleet_weight: float = 0.0  # teammates' segments count this much each (0: own only)
     # the teammates' pooled fit is a prior worth this many unit segments (0: none)
     fleet_prior_segments: float = 0.0
+    # a segment's registered motion from its two end frames aligned to each other, not from
+    # their poses against the map: the map the end frame meets was built during the segment,
+    # on the uncorrected wheels, and pulls the end back toward them (localization.py)
+    frame_pairs: bool = False
+    pair_max_corr_m: float = 0.3
+    pair_max_iterations: int = 30
+    # ... kept only this close (m, rad) to the motion the map gives: shelves repeat, and a
+    # pair can lock on the next one (35 cm off in a replay)
+    pair_gate_m: float = 0.05
+    pair_gate_rad: float = 0.02
 
 
 @dataclass(frozen=True)
@@ -276,13 +286,26 @@ class CalibratedOdometry:
         self._raw = xyyaw_raw
         return self._corrected
 
+    @property
+    def anchor_xyyaw(self) -> np.ndarray | None:
+        """The registered pose the open segment started at (None: no segment open)."""
+        return None if self._anchor is None else self._anchor[1]
+
+    def due(self) -> bool:
+        """Whether a good registration now would close the segment (or open the first)."""
+        p = self.calibration.params
+        return self._raw is not None and (self._anchor is None or self._driven >= p.segment_m
+                                          or self._turned >= p.segment_rad)
+
+    def drop_segment(self) -> None:
+        """Give up the open segment (its end cannot be measured): the next good
+        registration opens a new one."""
+        self._anchor = None
+        self._turn = self._distance = self._driven = self._turned = 0.0
+
     def registered(self, xyyaw_reg: np.ndarray) -> None:
         """A frame at the last seen raw pose registered well, at `xyyaw_reg` (loc frame)."""
-        p = self.calibration.params
-        if self._raw is None:
-            return
-        if self._anchor is not None and self._driven < p.segment_m \
-                and self._turned < p.segment_rad:
+        if not self.due():
             return
         if self._anchor is not None:
             self.calibration.add(segment_between(

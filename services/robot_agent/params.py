@@ -48,6 +48,7 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
                                       max_weak_ratio=cfg.odom_calibration_max_weak_ratio,
                                       prior_segments=cfg.odom_calibration_prior_segments,
                                       fleet_weight=cfg.odom_calibration_fleet_weight,
+                                      frame_pairs=cfg.odom_calibration_frame_pairs,
                                       fleet_prior_segments=(
                                           cfg.odom_calibration_fleet_prior_segments))
         if cfg.odom_calibration else None,
