@@ -167,6 +167,32 @@ def test_registrations_that_agree_bring_a_wrong_estimate_back() -> None:
     assert math.hypot(x, y) < 0.01 and abs(yaw) < math.radians(0.2)
 
 
+def test_without_reacquisition_the_wrong_estimate_stays() -> None:
+    """`reacquire_frames=0` (agent.reg_reacquire_frames): registrations that agree are
+    rejected all the same, however many, and the rejected ones are not hoarded."""
+    from dataclasses import replace
+
+    room = _room(np.random.default_rng(3))
+    loc = Localizer(RegistrationParams(map_voxel_m=0.05, min_points=30,
+                                       filter=replace(PARAMS, reacquire_frames=0)))
+    for k in range(12):
+        T_world_base = T_from_xyyaw(-1.0 + 0.02 * k, 0.1, 0.0)
+        slip = T_from_xyyaw(0.0, 0.0, math.radians(3.0 if k >= 5 else 0.0))
+        out = loc.update(_seen(room, T_world_base), T_world_base @ slip)
+    assert loc.outcomes["reacquired"] == 0 and not out.accepted
+    assert len(loc._rejected) <= 2
+    _, _, yaw = xyyaw_from_T(invert(T_world_base) @ out.T_loc_base)
+    assert abs(yaw) > math.radians(2.5)
+
+
+def test_reacquisition_frames_are_the_agent_config() -> None:
+    from services.robot_agent.config import AgentConfig
+    from services.robot_agent.params import registration_params
+
+    for n in (0, 3, 5):
+        assert registration_params(AgentConfig(reg_reacquire_frames=n)).filter.reacquire_frames == n
+
+
 def test_registrations_that_disagree_stay_rejected() -> None:
     still = [np.zeros(3)] * 3  # the wheels report no motion
     slide = [np.array([0.0, 0.0, 0.05]), np.array([0.06, 0.0, 0.05]), np.array([0.0, 0.0, 0.02])]

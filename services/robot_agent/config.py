@@ -85,6 +85,10 @@ class AgentConfig(BaseModel):
     reg_reacquire_rad_per_rad: float = Field(
         default=0.03, ge=0, description="re-acquisition: how far (rad per rad turned) the "
         "drift rejected registrations imply may change between them (odometry turn error)")
+    reg_reacquire_frames: int = Field(
+        default=3, ge=0, description="re-acquisition: this many registrations in a row the "
+        "filter rejected, telling one story with odometry, reset the pose to theirs (0 = "
+        "never)")
     reg_wall_reset_conflict_rad: float = Field(
         default=0.0, ge=0, description="forget the registration map when one frame's walls "
         "turn the heading by more than this (rad; 0 = never) and the frame's registration "

@@ -284,7 +284,7 @@ class Localizer:
         fusion = fuse(np.array(xyyaw_from_T(guess)), self.P, meas, R, filt)
         if not fusion.accepted:
             T_odom_base = invert(self.T_loc_odom) @ guess
-            self._rejected = self._rejected[-filt.reacquire_frames:] + [
+            self._rejected = self._rejected[-max(filt.reacquire_frames, 1):] + [
                 (meas, np.array(xyyaw_from_T(T_odom_base)))]
             if not agree([r for r, _ in self._rejected], [o for _, o in self._rejected], filt):
                 return RegistrationOutcome(guess, False, "implausible jump", T_reg,

@@ -36,6 +36,7 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
         coarse_voxel_m=cfg.reg_coarse_voxel_m, coarse_below_frac=cfg.reg_coarse_below_frac,
         coarse_agree_rad=cfg.reg_coarse_agree_rad,
         filter=FilterParams(reacquire_rad_per_rad=cfg.reg_reacquire_rad_per_rad,
+                            reacquire_frames=cfg.reg_reacquire_frames,
                             coupled_length_m=cfg.reg_coupled_length_m,
                             r_m=cfg.reg_sigma_m, r_rad=cfg.reg_sigma_rad,
                             weak_inflation_power=cfg.reg_weak_inflation_power,
