@@ -85,10 +85,15 @@ class AgentConfig(BaseModel):
     reg_reacquire_rad_per_rad: float = Field(
         default=0.03, ge=0, description="re-acquisition: how far (rad per rad turned) the "
         "drift rejected registrations imply may change between them (odometry turn error)")
+    # 0 (forty-fifth session, docs/agent.md "Calibration from frame pairs, and the
+    # re-acquisitions that go wrong in the warehouse"): every warehouse re-acquisition
+    # replayed moved the pose away from the truth (3.7-17 cm, most near the crowded start);
+    # warehouse 300 s seeds 0-4 BV median 2.82 -> 2.40 %, worst 8.25 -> 2.71 %; it fired
+    # once in 25 room missions
     reg_reacquire_frames: int = Field(
-        default=3, ge=0, description="re-acquisition: this many registrations in a row the "
+        default=0, ge=0, description="re-acquisition: this many registrations in a row the "
         "filter rejected, telling one story with odometry, reset the pose to theirs (0 = "
-        "never)")
+        "never; 3 brought back a lost turn in the early bookstore missions)")
     reg_wall_reset_conflict_rad: float = Field(
         default=0.0, ge=0, description="forget the registration map when one frame's walls "
         "turn the heading by more than this (rad; 0 = never) and the frame's registration "
