@@ -93,8 +93,11 @@ def replay(msgs: list[Submap], merger: MapMerger | None, voxel_m: float, every: 
             m = msgs[fed]
             reported[(m.robot_id, m.submap_id)] = m.T_world_submap
             T_fix = offset.get(m.robot_id)
-            store.apply(m if T_fix is None else m.model_copy(
-                update={"T_world_submap": T_fix @ m.T_world_submap}))
+            # merger off in the recording: the agent's frame was the world's (T_world_loc = I)
+            T_odom = m.T_world_submap if m.T_odom_submap is None else m.T_odom_submap
+            store.apply(m.model_copy(update={"T_odom_submap": T_odom}) if T_fix is None
+                        else m.model_copy(update={"T_world_submap": T_fix @ m.T_world_submap,
+                                                  "T_odom_submap": T_odom}))
             fed += 1
         if merger is None:
             continue

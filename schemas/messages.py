@@ -156,6 +156,10 @@ class Submap(Message):
     T_world_submap: Annotated[np.ndarray, ArraySpec("float64", (4, 4))] = Field(
         description="(4, 4) the agent's estimate of the submap frame in the world frame"
     )
+    T_odom_submap: Annotated[np.ndarray, ArraySpec("float64", (4, 4))] | None = Field(
+        default=None, description="(4, 4) the submap frame in the agent's own odometry frame, "
+        "which corrections never move: two submaps' relative pose is exact whatever "
+        "correction arrived between their reports (None: the edge uses T_world_submap)")
     points_mm: Annotated[np.ndarray, ArraySpec("int16", (3, None), compress=True,
                                                filter="delta", level=6)] = Field(
         description="(3, N) int16 voxel-centre coordinates in the submap frame, millimetres"

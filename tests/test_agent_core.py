@@ -77,6 +77,24 @@ def test_correction_moves_the_pose_estimate() -> None:
     assert math.isclose(pose.x, 1.5) and math.isclose(pose.y, 0.0, abs_tol=1e-12)
 
 
+def test_submaps_carry_the_agents_own_frame_which_a_correction_does_not_move() -> None:
+    core = AgentCore(AgentConfig(), 0, 0.1)
+    pose = (0.0, 0.0, 0.0)
+    sent = []
+    for k in range(21):
+        if k == 1:
+            core.on_correction(Correction(robot_id=0, tick=1, submap_ids=np.array([0], np.int32),
+                                          T_world_submap=T_from_xyyaw(0.5, 0.2, 0.1)[None]))
+        if k % 2 == 0:
+            core.on_rgbd(_frame(k, pose))
+        sent += [o.message for o in core.on_odometry(_odom(k, pose)) if o.topic == "submap"]
+    first, later = sent[0], sent[-1]
+    assert first.tick == 0 and later.tick >= 10 and later.submap_id == first.submap_id
+    assert np.array_equal(first.T_odom_submap, later.T_odom_submap)  # the agent's frame
+    assert np.allclose(first.T_world_submap, first.T_odom_submap)  # before the correction
+    assert np.allclose(later.T_world_submap, T_from_xyyaw(0.5, 0.2, 0.1) @ later.T_odom_submap)
+
+
 def test_reaches_a_goal_behind_a_wall_from_its_own_depth_frames() -> None:
     core = AgentCore(AgentConfig(), 0, 0.1)
     pose, ticks = _run(core, 400, goal_at=20)

@@ -245,3 +245,31 @@ def test_a_lone_registration_corrects_at_once_with_min_clique_one() -> None:
     assert not changed and not any(waiting.inliers.values())
     for key in [(1, 1), (1, 2), (1, 3)]:
         assert np.array_equal(waiting.estimates[key], store.submaps[key].T_reported)
+
+
+def test_odometry_edges_from_the_agents_frame_ignore_a_correction_between_reports() -> None:
+    """A correction reached the agent after submap 1's report and before submap 2's (the edge
+    has not corrected submap 1): the reports step by it, the agent's own frame does not. With
+    `agent_frame` the odometry edge is the agent's relative pose; from the reports it carries
+    the step, which the chain's few-centimetre σ cannot absorb."""
+    steps = [T_from_xyyaw(0, 0, 0), T_from_xyyaw(1.0, 0, 0), T_from_xyyaw(2.0, 0.1, 0.2)]
+    step = T_from_xyyaw(0.12, -0.05, 0.02)  # the correction the agent re-anchored on
+    pts = np.random.default_rng(0).uniform(-1, 1, (300, 3))
+    edges = {}
+    for agent_frame in (False, True):
+        store = SubmapStore(V)
+        for sid, T_odom in enumerate(steps):
+            reported = step @ T_odom if sid == 2 else T_odom
+            msg = make_submap(0, sid, sid, 10 * sid + 1, reported, pts)
+            store.apply(msg.model_copy(update={"T_odom_submap": T_odom}))
+        merger = MapMerger(V, MergerParams(agent_frame=agent_frame))
+        merger.update(store)
+        edges[agent_frame] = merger.odometry[1].T_a_b
+        steps_m = [dt for dt, _ in merger.report_steps]  # counted whichever edge is used
+        assert steps_m[0] < 1e-9 and steps_m[1] > 0.1
+        assert "> 1 cm in 1," in merger.report_step_summary()
+        if agent_frame:  # the new node starts from the chain, not from the stale report
+            assert np.allclose(merger.estimates[(0, 2)], steps[2])
+    exact = invert(steps[1]) @ steps[2]
+    assert np.allclose(edges[True], exact)
+    assert pose_change(edges[False], exact)[0] > 0.1

@@ -247,3 +247,16 @@ def test_unknown_or_misplaced_array_filter_is_refused() -> None:
     obj["depth_m"]["f"] = "delta"
     with pytest.raises(DecodeError, match="filter"):
         decode(_pack(obj))
+
+
+def test_submap_odometry_frame_pose_is_optional_and_checked() -> None:
+    submap = next(s for s in _samples() if isinstance(s, m.Submap))
+    assert decode(encode(submap), m.Submap).T_odom_submap is None  # an older agent's
+    T = np.eye(4)
+    T[:2, 3] = [1.5, -0.25]
+    with_pose = decode(encode(submap.model_copy(update={"T_odom_submap": T})), m.Submap)
+    assert np.array_equal(with_pose.T_odom_submap, T)
+    obj = _raw(submap.model_copy(update={"T_odom_submap": T}))
+    obj["T_odom_submap"]["shape"], obj["T_odom_submap"]["data"] = [3, 4], T[:3].tobytes()
+    with pytest.raises(DecodeError):
+        decode(_pack(obj))

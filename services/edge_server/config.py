@@ -226,6 +226,11 @@ class EdgeConfig(BaseModel):
         default=20.0, ge=0, description="a registration whose planar translation "
         "information is this much weaker in one direction than the other is rejected (0: no "
         "test)")
+    merge_agent_frame: bool = Field(
+        default=False, description="odometry edges and PCM's chains from the submap poses in "
+        "each agent's own frame (Submap.T_odom_submap), which corrections never move, instead "
+        "of the reported world poses, which step wherever a correction reached the agent "
+        "between two reports")
     # assignment
     keep_radius_m: float = Field(
         default=0.5, ge=0, description="hysteresis: a goal is kept while a frontier lies this close"

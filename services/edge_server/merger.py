@@ -78,6 +78,9 @@ class MergerParams:
     # inter-robot edges enter the graph only inside a consistent set (None: every edge)
     consistency: ConsistencyParams | None = field(
         default_factory=lambda: ConsistencyParams(tol_m_per_m=0.005))
+    # odometry edges and PCM's chains from the agents' own-frame poses (T_odom) where sent,
+    # instead of the reported world poses, which step wherever a correction reached the agent
+    agent_frame: bool = False
 
 
 def merger_params(config: EdgeConfig) -> MergerParams:
@@ -101,7 +104,8 @@ def merger_params(config: EdgeConfig) -> MergerParams:
         consistency=ConsistencyParams(
             tol_m=config.merge_pcm_tol_m, tol_m_per_m=config.merge_pcm_tol_m_per_m,
             tol_rad=config.merge_pcm_tol_rad, tol_rad_per_m=config.merge_pcm_tol_rad_per_m,
-            min_clique=config.merge_pcm_min_clique))
+            min_clique=config.merge_pcm_min_clique),
+        agent_frame=config.merge_agent_frame)
 
 
 def pose_change(T_a: np.ndarray, T_b: np.ndarray) -> tuple[float, float]:
@@ -129,6 +133,9 @@ class MapMerger:
         self._prepared: OrderedDict[SubmapKey, tuple[int, Prepared]] = OrderedDict()
         self._epochs: dict[int, set[int]] = {}
         self._dirty = False
+        # per odometry edge with both agent-frame poses: (m, rad) between the edge from the
+        # reports and the exact one
+        self.report_steps: list[tuple[float, float]] = []
 
     # -- graph building --------------------------------------------------------------------
     def _add_node(self, sm: StoredSubmap, previous: StoredSubmap | None) -> None:
@@ -140,8 +147,9 @@ class MapMerger:
         elif sm.epoch not in epochs or previous is None or previous.epoch != sm.epoch:
             self.priors[key] = Prior(key, sm.T_reported.copy(), self.params.restart_prior_info)
         else:
-            T_world_a = previous.T_world_submap if previous.corrected else previous.T_reported
-            T_a_b = invert(T_world_a) @ sm.T_reported
+            T_a_b = self._odometry_of(previous, sm)
+            if self.params.agent_frame and sm.T_odom is not None:
+                self.estimates[key] = self.estimates[previous.key] @ T_a_b  # not a stale frame
             self.odometry.append(Between(previous.key, key, T_a_b, self._odometry_info(T_a_b),
                                          robust=False))
             path = self._path_m.get((sm.robot_id, sm.epoch), 0.0) + float(
@@ -153,6 +161,36 @@ class MapMerger:
                     [0.01, 0.01, self.params.report_sigma_rad], [sigma, sigma, 0.01])))
         epochs.add(sm.epoch)
         self._dirty = True
+
+    def _odometry_of(self, a: StoredSubmap, b: StoredSubmap) -> np.ndarray:
+        """T_a_b of consecutive submaps of one agent: exact from its own frame where it sent
+        it; else from the reports, with a's corrected pose (the agent re-anchored on it)."""
+        T_world_a = a.T_world_submap if a.corrected else a.T_reported
+        from_reports = invert(T_world_a) @ b.T_reported
+        if a.T_odom is None or b.T_odom is None:
+            return from_reports
+        exact = invert(a.T_odom) @ b.T_odom
+        dt, dr = pose_change(from_reports, exact)
+        self.report_steps.append((dt, dr))  # what the reports' edge would have got wrong
+        return exact if self.params.agent_frame else from_reports
+
+    def _chain_pose(self, sm: StoredSubmap) -> np.ndarray:
+        """A submap's pose along its robot's chain, for PCM's loops."""
+        if self.params.agent_frame and sm.T_odom is not None:
+            return sm.T_odom
+        return sm.T_reported
+
+    def report_step_summary(self) -> str:
+        """How far the odometry edges from the reports would be (or were) from the agents'
+        own relative poses: corrections that reached an agent between two reports."""
+        if not self.report_steps:
+            return "no odometry edge with the agents' own-frame poses"
+        dt, dr = np.array(self.report_steps).T
+        return (f"{dt.size} odometry edges; the reports' were off by > 1 cm in "
+                f"{int(np.count_nonzero(dt > 0.01))}, > 0.2 deg in "
+                f"{int(np.count_nonzero(dr > np.radians(0.2)))}; max {100 * dt.max():.1f} cm, "
+                f"{np.degrees(dr.max()):.2f} deg ({'not ' if not self.params.agent_frame else ''}"
+                "used: edge.merge_agent_frame)")
 
     def _odometry_info(self, T_a_b: np.ndarray) -> np.ndarray:
         """Planar odometry information, looser the further and the more the robot turned."""
@@ -272,7 +310,7 @@ class MapMerger:
             return [True] * len(edges)
         keys = {k for e in edges for k in (e.a, e.b)}
         subs = {k: store.submaps[k] for k in keys}
-        return select(edges, {k: sm.T_reported for k, sm in subs.items()},
+        return select(edges, {k: self._chain_pose(sm) for k, sm in subs.items()},
                       {k: (sm.robot_id, sm.epoch) for k, sm in subs.items()},
                       self.params.consistency, self._pcm_memo)
 

@@ -197,4 +197,6 @@ def main(config: SpacemapConfig) -> None:
                          statistics.median(node.all_plan_ms), dict(node.planner.book.drops))
     log.info("edge stopped (submap seq gaps: %s; %d map/cloud queries held the lock %.2f s)",
              dict(node.planner.store.seq_gaps), node.cloud_queries, node.cloud_lock_s)
+    if config.edge.merge:
+        log.info("merger: %s", node.planner.merger.report_step_summary())
 

@@ -11,6 +11,7 @@ length. `version` bumps on new data and
 Poses: `T_reported` is the agent's latest estimate; `T_world_submap` is where the submap is
 placed, the reported pose until the merger corrects it (`corrected`), after which reports no
 longer move it (a later delta of an old submap carries the agent's re-anchored frame).
+`T_odom` is the pose in the agent's own odometry frame, which corrections never move.
 Sequence numbers are checked per (robot, epoch): a restarted agent starts a new epoch, and a
 resend of data the edge already holds is applied idempotently (upserts) without a gap warning.
 """
@@ -50,6 +51,7 @@ class StoredSubmap:
     pose_version: int = 0
     epoch: int = 0
     T_reported: np.ndarray = field(default_factory=lambda: np.eye(4))
+    T_odom: np.ndarray | None = None  # the agent's own frame, never corrected (None: not sent)
     corrected: bool = False
 
     @property
@@ -105,6 +107,7 @@ class SubmapStore:
             sm.T_world_submap = msg.T_world_submap.copy()
             sm.pose_version += 1
         sm.T_reported = msg.T_world_submap.copy()
+        sm.T_odom = None if msg.T_odom_submap is None else msg.T_odom_submap.copy()
         centres_submap = msg.points_mm.T.astype(np.float64) / 1000.0  # mm → m, (N, 3)
         if centres_submap.shape[0]:
             indices = voxel_indices(centres_submap, self.voxel_m)

@@ -100,6 +100,7 @@ class Outbox:
         msg = Submap(
             robot_id=self.robot_id, epoch=epoch, submap_id=delta.submap_id, seq=self.seq,
             tick=tick, stamp_ns=stamp_ns, T_world_submap=T_world_loc @ delta.T_odom_submap,
+            T_odom_submap=delta.T_odom_submap,
             points_mm=delta.points_mm, colors=delta.colors, counts=delta.counts,
             free_cells=delta.free_cells, cell_m=self.cell_m,
             offsets=delta.offsets, offset_levels=delta.offset_levels,
