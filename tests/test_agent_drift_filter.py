@@ -99,6 +99,24 @@ def test_a_higher_inflation_power_weakens_only_the_weak_direction() -> None:
     assert w2[1] / w2[0] <= PARAMS.max_weak_inflation * (1 + 1e-9)
 
 
+def test_the_inflation_knee_keeps_power_one_below_it() -> None:
+    """Above the knee the ratio is knee·(r / knee)^power; a room's mild ratio is untouched."""
+    rng = np.random.default_rng(0)
+    yaw = math.radians(30)
+    corridor = _hessian(_corridor(rng), T_from_xyyaw(0.0, 0.0, yaw))
+    room = _hessian(_room(np.random.default_rng(1)), T_from_xyyaw(0.5, 0.3, 0.4))
+    knee = replace(PARAMS, weak_inflation_power=2.0, weak_inflation_knee=20.0)
+    for H, y in ((corridor, yaw), (room, 0.4)):
+        w1 = np.linalg.eigvalsh(measurement_cov(H, y, PARAMS)[:2, :2])
+        wk = np.linalg.eigvalsh(measurement_cov(H, y, knee)[:2, :2])
+        r = w1[1] / w1[0]
+        want = r if r <= 20.0 else min(20.0 * (r / 20.0) ** 2, PARAMS.max_weak_inflation)
+        assert math.isclose(wk[1] / wk[0], want, rel_tol=1e-6), (r, wk[1] / wk[0], want)
+        assert math.isclose(wk[0], w1[0], rel_tol=1e-9)  # the strong direction as before
+    w = np.linalg.eigvalsh(measurement_cov(corridor, yaw, PARAMS)[:2, :2])
+    assert w[1] / w[0] > 20.0  # the test covers both sides of the knee
+
+
 def test_filtered_localizer_removes_drift_and_ignores_a_slide() -> None:
     rng = np.random.default_rng(2)
     room = _room(rng)

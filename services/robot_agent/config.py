@@ -195,6 +195,10 @@ class AgentConfig(BaseModel):
         default=1.0, ge=1, le=3, description="a registration's σ² along a weaker direction "
         "grows by its information ratio to the strongest, to this power (2: along an aisle, "
         "where the view's edges pull frames back, the wheels count for more)")
+    reg_weak_inflation_knee: float = Field(
+        default=1.0, ge=1, description="... for the part of that ratio above this only (ratio "
+        "r ≤ knee: σ² × r; above: × knee·(r / knee)^power): the rooms' mildly lopsided "
+        "registrations keep power 1's weight, the aisles' (r ~ 100) get the wheels")
     reg_coupled_length_m: float = Field(
         default=0.0, ge=0, description="> 0: a registration's covariance from its whole planar "
         "information, yaw compared at this lever arm (drift_filter.measurement_cov)")

@@ -38,6 +38,7 @@ class FilterParams:
     # σ² along a weaker direction grows by (strongest / its information) to this power: above
     # 1 a registration's weak direction (along an aisle) counts for less against the wheels
     weak_inflation_power: float = 1.0
+    weak_inflation_knee: float = 1.0  # ... only for the part of the ratio above this
     chi2_gate: float = 16.27  # 3 dof, p = 0.999
     coupled_length_m: float = 0.0  # > 0: R from the whole planar information (see below)
     # re-acquisition: this many gate-rejected registrations in a row (0 = never) that agree
@@ -91,7 +92,7 @@ def measurement_cov(H6: np.ndarray | None, yaw: float, params: FilterParams) -> 
         if H[2, 2] > 0:
             Ht = H[:2, :2] - np.outer(H[:2, 2], H[2, :2]) / H[2, 2]
             R_t = _inflated(Ht, params.r_m**2, params.max_weak_inflation,
-                            params.weak_inflation_power)
+                            params.weak_inflation_power, params.weak_inflation_knee)
     rot = _rot(yaw)
     out = np.zeros((3, 3))
     out[:2, :2] = rot @ R_t @ rot.T
@@ -119,7 +120,8 @@ def _coupled_cov(H6: np.ndarray, yaw: float, params: FilterParams) -> np.ndarray
     L = params.coupled_length_m
     S = np.diag([1.0, 1.0, 1.0 / L])  # (x, y, yaw) = S · (x, y, L·yaw)
     Hn = np.linalg.inv(S) @ Hp @ np.linalg.inv(S)  # information in (x, y, L·yaw)
-    Rn = _inflated(Hn, params.r_m**2, params.max_weak_inflation, params.weak_inflation_power)
+    Rn = _inflated(Hn, params.r_m**2, params.max_weak_inflation, params.weak_inflation_power,
+                   params.weak_inflation_knee)
     R_body = S @ Rn @ S
     T = np.eye(3)
     T[:2, :2] = _rot(yaw)
@@ -127,14 +129,16 @@ def _coupled_cov(H6: np.ndarray, yaw: float, params: FilterParams) -> np.ndarray
 
 
 def _inflated(H: np.ndarray, sigma2: float, max_inflation: float,
-              power: float = 1.0) -> np.ndarray:
+              power: float = 1.0, knee: float = 1.0) -> np.ndarray:
     """σ² in every direction, times (strongest / this) information along each eigenvector,
-    to `power`, at most `max_inflation`."""
+    to `power` beyond `knee` (r ≤ knee: r; above: knee·(r / knee)^power), at most
+    `max_inflation`."""
     w, V = np.linalg.eigh(0.5 * (H + H.T))
     if w[-1] <= 0:
         return np.eye(len(w)) * sigma2 * max_inflation
     ratio = np.clip(w[-1] / np.maximum(w, w[-1] / max_inflation), 1.0, max_inflation)
-    ratio = np.minimum(ratio**power, max_inflation)
+    ratio = np.where(ratio > knee, knee * (ratio / knee) ** power, ratio)
+    ratio = np.minimum(ratio, max_inflation)
     return V @ np.diag(sigma2 * ratio) @ V.T
 
 

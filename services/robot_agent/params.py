@@ -40,6 +40,7 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
                             coupled_length_m=cfg.reg_coupled_length_m,
                             r_m=cfg.reg_sigma_m, r_rad=cfg.reg_sigma_rad,
                             weak_inflation_power=cfg.reg_weak_inflation_power,
+                            weak_inflation_knee=cfg.reg_weak_inflation_knee,
                             full_overlap_frac=cfg.reg_full_overlap_frac,
                             max_jump_sigmas=cfg.reg_max_jump_sigmas,
                             q_rad2_per_rad=cfg.odom_turn_sigma_per_sqrt_rad**2,
