@@ -271,6 +271,28 @@ def test_a_frame_that_matched_few_points_is_a_weaker_measurement() -> None:
     assert 0.0 < weak < strong  # believed less
 
 
+def test_a_frame_of_few_points_weighs_less_but_is_gated_at_its_own_precision() -> None:
+    """`full_inliers`: a registration that matched fewer points than that is weaker by the
+    ratio (off by default). The gate still judges it at its nominal R: weighing it down must
+    not let through a jump the nominal gate stops (a 4° turn accepted in a warehouse replay
+    once R was inflated tenfold)."""
+    from services.robot_agent.drift_filter import count_inflation
+    on = replace(PARAMS, full_inliers=1000)
+    assert count_inflation(0.5, 400, on) == 5.0 and count_inflation(0.9, 2000, on) == 1.0
+    assert count_inflation(0.5, 400, PARAMS) == 1.0  # off by default
+    P = _settled_P(20, 0.0)
+    R = measurement_cov(None, 0.0, PARAMS)
+    k = count_inflation(0.5, 400, on)
+    along = np.array([0.006, 0.0, 0.0])
+    full = fuse(np.zeros(3), P, along, R, PARAMS)
+    few = fuse(np.zeros(3), P, along, R * k, PARAMS, R)
+    assert full.accepted and few.accepted and 0.0 < few.xyyaw[0] < 0.5 * full.xyyaw[0]
+    turn = np.array([0.0, 0.0, math.radians(2.0)])
+    assert not fuse(np.zeros(3), P, turn, R, PARAMS).accepted
+    assert fuse(np.zeros(3), P, turn, R * 25.0, PARAMS).accepted  # inflated, gated loosely
+    assert not fuse(np.zeros(3), P, turn, R * 25.0, PARAMS, R).accepted
+
+
 def test_a_frame_gicp_did_not_converge_on_can_still_correct_the_guess() -> None:
     """Turning fast, GICP can stop short of its 6-DoF tolerance while its planar pose is
     already good (house seed 0, robot 2: guess 0.7° off, unconverged GICP 0.07°); inserting

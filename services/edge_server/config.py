@@ -231,6 +231,10 @@ class EdgeConfig(BaseModel):
         "each agent's own frame (Submap.T_odom_submap), which corrections never move, instead "
         "of the reported world poses, which step wherever a correction reached the agent "
         "between two reports")
+    merge_own_loop_gap: int = Field(
+        default=0, ge=0, description="> 0: a robot's own submaps this many or more apart (same "
+        "epoch) are candidate pairs too, loop closures within its chain, judged like any "
+        "registration; 0: pairs of different robots only")
     # assignment
     keep_radius_m: float = Field(
         default=0.5, ge=0, description="hysteresis: a goal is kept while a frontier lies this close"

@@ -81,6 +81,8 @@ class MergerParams:
     # odometry edges and PCM's chains from the agents' own-frame poses (T_odom) where sent,
     # instead of the reported world poses, which step wherever a correction reached the agent
     agent_frame: bool = False
+    # > 0: a robot's own submaps at least this many apart (same epoch) are candidates too
+    own_loop_gap: int = 0
 
 
 def merger_params(config: EdgeConfig) -> MergerParams:
@@ -105,7 +107,7 @@ def merger_params(config: EdgeConfig) -> MergerParams:
             tol_m=config.merge_pcm_tol_m, tol_m_per_m=config.merge_pcm_tol_m_per_m,
             tol_rad=config.merge_pcm_tol_rad, tol_rad_per_m=config.merge_pcm_tol_rad_per_m,
             min_clique=config.merge_pcm_min_clique),
-        agent_frame=config.merge_agent_frame)
+        agent_frame=config.merge_agent_frame, own_loop_gap=config.merge_own_loop_gap)
 
 
 def pose_change(T_a: np.ndarray, T_b: np.ndarray) -> tuple[float, float]:
@@ -210,8 +212,8 @@ class MapMerger:
 
     def _candidates(self, closed: list[StoredSubmap], limit: int
                     ) -> list[tuple[StoredSubmap, StoredSubmap]]:
-        """The first `limit` untried pairs of closed submaps of different robots, largest box
-        overlap first."""
+        """The first `limit` untried pairs of closed submaps of different robots (or of one
+        robot's chain, `own_loop_gap` or more apart), largest box overlap first."""
         if len(closed) < 2 or limit <= 0:
             return []
         boxes = world_boxes(np.stack([self._box_of(sm) for sm in closed]),
@@ -219,6 +221,11 @@ class MapMerger:
         rows, cols, overlap = overlapping_pairs(boxes, self.params.min_overlap_m3)
         robots = np.array([sm.robot_id for sm in closed])
         other = robots[rows] != robots[cols]
+        if self.params.own_loop_gap > 0:
+            ids = np.array([sm.submap_id for sm in closed])
+            epochs = np.array([sm.epoch for sm in closed])
+            other |= ((robots[rows] == robots[cols]) & (epochs[rows] == epochs[cols])
+                      & (np.abs(ids[rows] - ids[cols]) >= self.params.own_loop_gap))
         rows, cols, overlap = rows[other], cols[other], overlap[other]
         pairs = []
         for k in np.lexsort((cols, rows, -overlap)):  # largest first, then by index

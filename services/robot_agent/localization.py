@@ -21,6 +21,7 @@ from services.common.geometry import T_from_xyyaw, invert, wrap_angle, xyyaw_fro
 from services.robot_agent.drift_filter import (
     FilterParams,
     agree,
+    count_inflation,
     fuse,
     measurement_cov,
     overlap_inflation,
@@ -280,8 +281,10 @@ class Localizer:
             reg.insert(cloud, guess)
             self._rejected = []
             return RegistrationOutcome(guess, False, "map reset by the walls", T_reg)
-        R = measurement_cov(H, meas[2], filt) * overlap_inflation(inliers, filt)
-        fusion = fuse(np.array(xyyaw_from_T(guess)), self.P, meas, R, filt)
+        R_gate = measurement_cov(H, meas[2], filt) * overlap_inflation(inliers, filt)
+        R = R_gate * count_inflation(
+            inliers, (cloud if align_cloud is None else align_cloud).size(), filt)
+        fusion = fuse(np.array(xyyaw_from_T(guess)), self.P, meas, R, filt, R_gate)
         if not fusion.accepted:
             T_odom_base = invert(self.T_loc_odom) @ guess
             self._rejected = self._rejected[-max(filt.reacquire_frames, 1):] + [

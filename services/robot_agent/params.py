@@ -42,6 +42,7 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
                             weak_inflation_power=cfg.reg_weak_inflation_power,
                             weak_inflation_knee=cfg.reg_weak_inflation_knee,
                             full_overlap_frac=cfg.reg_full_overlap_frac,
+                            full_inliers=cfg.reg_full_inliers,
                             max_jump_sigmas=cfg.reg_max_jump_sigmas,
                             q_rad2_per_rad=cfg.odom_turn_sigma_per_sqrt_rad**2,
                             q_rad2_per_m=cfg.odom_heading_sigma_per_sqrt_m**2)
