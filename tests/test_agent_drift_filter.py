@@ -273,13 +273,13 @@ def test_a_frame_that_matched_few_points_is_a_weaker_measurement() -> None:
 
 def test_a_frame_of_few_points_weighs_less_but_is_gated_at_its_own_precision() -> None:
     """`full_inliers`: a registration that matched fewer points than that is weaker by the
-    ratio (off by default). The gate still judges it at its nominal R: weighing it down must
-    not let through a jump the nominal gate stops (a 4° turn accepted in a warehouse replay
-    once R was inflated tenfold)."""
+    ratio (the agent's config sets 1000; 0 in bare FilterParams). The gate still judges it
+    at its nominal R: weighing it down must not let through a jump the nominal gate stops (a
+    4.8° turn accepted in a warehouse replay once R was inflated)."""
     from services.robot_agent.drift_filter import count_inflation
     on = replace(PARAMS, full_inliers=1000)
     assert count_inflation(0.5, 400, on) == 5.0 and count_inflation(0.9, 2000, on) == 1.0
-    assert count_inflation(0.5, 400, PARAMS) == 1.0  # off by default
+    assert count_inflation(0.5, 400, PARAMS) == 1.0  # 0: the count does not matter
     P = _settled_P(20, 0.0)
     R = measurement_cov(None, 0.0, PARAMS)
     k = count_inflation(0.5, 400, on)

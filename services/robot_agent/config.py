@@ -188,9 +188,10 @@ class AgentConfig(BaseModel):
         default=0.7, ge=0, le=1, description="a registration whose inlier share is below "
         "this is weaker by the ratio (R inflated); 0 = every registration alike")
     reg_full_inliers: int = Field(
-        default=0, ge=0, description="... and one that matched fewer points than this (after "
-        "downsampling) is weaker by the ratio too: a few hundred far points carry less than a "
-        "room's thousand; 0 = the count does not matter")
+        default=1000, ge=0, description="... and one that matched fewer points than this "
+        "(after downsampling) is weaker by the ratio too, gated at its own precision: a few "
+        "hundred far points carry less than a room's thousand (warehouse BV median 1.25 -> "
+        "0.32 %, docs/agent.md \"A frame of a few far points\"); 0 = the count does not matter")
     reg_sigma_m: float = Field(
         default=0.005, gt=0, description="σ of one registration along its strong directions, m")
     reg_sigma_rad: float = Field(
