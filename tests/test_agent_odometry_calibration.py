@@ -10,8 +10,10 @@ import pytest
 from services.robot_agent.config import AgentConfig
 from services.robot_agent.odometry_calibration import (
     CalibratedOdometry,
+    Calibration,
     CalibrationParams,
     OdometryErrors,
+    Segment,
     corrected_increment,
     is_good_registration,
 )
@@ -331,3 +333,15 @@ def test_a_given_up_segment_opens_again_at_the_next_good_frame() -> None:
     assert odo.anchor_xyyaw is None
     odo.registered(np.array([1.18, 0.0, 0.0]))
     assert odo.calibration.n_used == 0 and np.allclose(odo.anchor_xyyaw, [1.18, 0, 0])
+
+
+def test_no_prior_and_straight_segments_only_learn_the_scale_without_failing() -> None:
+    """`odom_calibration_prior_segments` may be 0: before any turn the turn scale and the
+    heading bias cannot be told apart, and the fit must still give the scale."""
+    cal = Calibration(CalibrationParams(prior_segments=0.0))
+    for _ in range(3):
+        assert cal.add(Segment(odom_chord_m=1.02, reg_chord_m=1.0, odom_turn_rad=0.0,
+                               reg_turn_rad=0.0, signed_distance_m=0.0, driven_m=1.02,
+                               turned_rad=0.0))
+    assert abs(cal.errors.scale - 0.02) < 1e-9
+    assert np.isfinite(cal.errors.turn_scale) and np.isfinite(cal.errors.heading_bias_rad_per_m)

@@ -212,7 +212,11 @@ class Calibration:
         c = np.zeros(3) if centre is None else n * centre
         scale = (stats[0] + c[0] / var_t) / (stats[1] + n / var_t)
         normal = np.array([[stats[2], stats[3]], [stats[3], stats[4]]]) + np.eye(2) * (n / var_r)
-        turn_scale, bias = np.linalg.solve(normal, stats[5:7] + c[1:3] / var_r)
+        rhs = stats[5:7] + c[1:3] / var_r
+        try:
+            turn_scale, bias = np.linalg.solve(normal, rhs)
+        except np.linalg.LinAlgError:  # no prior, and no turn yet to tell the two apart
+            turn_scale, bias = np.linalg.lstsq(normal, rhs, rcond=None)[0]
         return OdometryErrors(
             scale=float(np.clip(scale, -p.max_abs_scale, p.max_abs_scale)),
             turn_scale=float(np.clip(turn_scale, -p.max_abs_scale, p.max_abs_scale)),
