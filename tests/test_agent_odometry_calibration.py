@@ -345,3 +345,58 @@ def test_no_prior_and_straight_segments_only_learn_the_scale_without_failing() -
                                turned_rad=0.0))
     assert abs(cal.errors.scale - 0.02) < 1e-9
     assert np.isfinite(cal.errors.turn_scale) and np.isfinite(cal.errors.heading_bias_rad_per_m)
+
+
+def _teammates(scales: list[float], n: int) -> list:
+    from services.robot_agent.odometry_calibration import Calibration
+
+    out = []
+    for k, scale in enumerate(scales):
+        cal = Calibration(CalibrationParams(min_segments_for_outliers=10**6))
+        for seg in _segments(100 + k, n, scale=scale):
+            cal.add(seg)
+        out.append(cal.own_stats())
+    return out
+
+
+def test_the_fleet_spread_sets_the_priors_weight_heavy_for_alike_wheels_light_otherwise() -> None:
+    """Eight teammates on the same wheels: the between-robot variance is their noise alone
+    and the prior weighs near the cap; eight whose wheels are 1-4 % long: no heavier than
+    the configured floor's order; too few teammates: the configured weight."""
+    from services.robot_agent.odometry_calibration import (
+        Calibration,
+        between_variance,
+        fleet_prior_weights,
+    )
+
+    params = CalibrationParams(fleet_prior_segments=8.0, fleet_prior_from_spread=True,
+                               min_segments_for_outliers=10**6)
+    alike = np.array(_teammates([0.02] * 8, 60))
+    differ = np.array(_teammates([0.01, 0.04, 0.02, 0.03, 0.015, 0.035, 0.01, 0.04], 60))
+    assert fleet_prior_weights(alike, params)[0] > 500
+    assert fleet_prior_weights(differ, params)[0] < 40
+    assert between_variance(np.array([0.01]), np.array([1.0])) == np.inf
+    # a robot of the alike fleet with a few noisy segments of its own stays on the fleet's
+    # scale; the same robot among the differing fleet follows its own
+    mine = _segments(7, 6, scale=0.035)
+    for fleet, near in ((alike, 0.02), (differ, None)):
+        cal = Calibration(params)
+        for r, stats in enumerate(fleet):
+            cal.receive(r, list(stats))
+        for seg in mine:
+            cal.add(seg)
+        if near is not None:
+            assert cal.errors.scale == pytest.approx(near, abs=0.002)
+        else:
+            assert cal.errors.scale > 0.028
+    few = Calibration(params)
+    for r, stats in enumerate(alike[:3]):
+        few.receive(r, list(stats))
+    fixed = Calibration(CalibrationParams(fleet_prior_segments=8.0,
+                                          min_segments_for_outliers=10**6))
+    for r, stats in enumerate(alike[:3]):
+        fixed.receive(r, list(stats))
+    for seg in mine:
+        few.add(seg)
+        fixed.add(seg)
+    assert few.errors == fixed.errors

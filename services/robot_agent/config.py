@@ -265,6 +265,12 @@ class AgentConfig(BaseModel):
         "error' one, which its own segments outweigh as they accumulate (robots of one model "
         "whose wheels may differ; 0 = its own segments only; docs/agent.md, 'The fleet's "
         "wheels as a prior')")
+    odom_calibration_fleet_prior_from_spread: bool = Field(
+        default=False, description="the fleet prior's weight learned from how much the "
+        "teammates' own fits differ beyond their noise (empirical Bayes, per parameter): up to "
+        "10 000 segments when the wheels are alike, down to fleet_prior_segments when they "
+        "differ; needs 5 teammates with fits (docs/agent.md, 'The fleet prior's weight from "
+        "the fleet's spread')")
     odom_calibration_max_weak_ratio: float = Field(
         default=10.0, ge=1, description="a registration ends a calibration segment only when "
         "its weakest translation direction is at most this many times weaker (variance) than "

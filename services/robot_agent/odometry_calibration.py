@@ -27,7 +27,11 @@ Where robots' wheels differ, pooling fully hands every robot the fleet's mean. W
 `fleet_prior_segments` > 0 the teammates' pooled fit is instead the centre of the prior, which
 then weighs that many unit segments more than the "no error" one did: a robot with no segment
 of its own drives on the fleet's estimate, and its own segments take over as they outnumber
-the prior (a hierarchical model: the fleet's wheels as the prior of each robot's).
+the prior (a hierarchical model: the fleet's wheels as the prior of each robot's). With
+`fleet_prior_from_spread` the prior's weight is learned from how much the teammates' own fits
+differ beyond their sampling noise (the between-robot variance τ², DerSimonian-Laird, per
+parameter): wheels alike give a prior worth up to `fleet_prior_max_segments`, wheels that
+differ one no heavier than `fleet_prior_segments` (empirical Bayes).
 
 Pure: numpy in, numpy out; the state is a small accumulator.
 """
@@ -64,6 +68,11 @@ class CalibrationParams:
     fleet_weight: float = 0.0  # teammates' segments count this much each (0: own only)
     # the teammates' pooled fit is a prior worth this many unit segments (0: none)
     fleet_prior_segments: float = 0.0
+    # ... or, with this, 1 / τ² unit segments (at least the above, at most the cap) once at
+    # least `fleet_spread_min_teammates` teammates have fits to compare
+    fleet_prior_from_spread: bool = False
+    fleet_prior_max_segments: float = 10_000.0
+    fleet_spread_min_teammates: int = 5
     # a segment's registered motion from its two end frames aligned to each other, not from
     # their poses against the map: the map the end frame meets was built during the segment,
     # on the uncorrected wheels, and pulls the end back toward them (localization.py)
@@ -135,6 +144,8 @@ class Calibration:
     _turn_rhs: np.ndarray = field(default_factory=lambda: np.zeros(2))
     _fleet: np.ndarray = field(default_factory=lambda: np.zeros(STATS))  # teammates' sums
     _teammates: dict[int, np.ndarray] = field(default_factory=dict)  # their latest sums
+    # the fleet prior's weight in unit segments (scale, turn scale, bias) of the last fit
+    fleet_prior_weight: np.ndarray | None = None
 
     def own_stats(self) -> np.ndarray:
         """(7,) this robot's own normal equations: scale numerator and denominator, turn
@@ -198,20 +209,25 @@ class Calibration:
             return self._fit(own)
         fleet = self._fit(self._fleet)
         centre = np.array([fleet.scale, fleet.turn_scale, fleet.heading_bias_rad_per_m])
-        return self._fit(own, centre, p.fleet_prior_segments)
+        weight = np.full(3, p.fleet_prior_segments)
+        if p.fleet_prior_from_spread and len(self._teammates) >= p.fleet_spread_min_teammates:
+            weight = fleet_prior_weights(
+                np.array([self._teammates[r] for r in sorted(self._teammates)]), p)
+        self.fleet_prior_weight = weight
+        return self._fit(own, centre, weight)
 
     def _fit(self, stats: np.ndarray, centre: np.ndarray | None = None,
-             centre_segments: float = 0.0) -> OdometryErrors:
+             centre_segments: float | np.ndarray = 0.0) -> OdometryErrors:
         """Errors from summed `own_stats`-shaped normal equations and a prior of
-        `prior_segments` + `centre_segments` unit segments (1 m, 1 rad) at the nominal noise,
-        centred on "no error" or on `centre` (scale, turn scale, heading bias)."""
+        `prior_segments` + `centre_segments` unit segments (1 m, 1 rad) at the nominal noise
+        (one weight, or one per parameter), centred on "no error" or on `centre` (scale, turn
+        scale, heading bias)."""
         p = self.params
-        var_t = 2 * p.reg_sigma_m**2 + p.walk_m2_per_m
-        var_r = 2 * p.reg_sigma_rad**2 + p.walk_rad2_per_rad
-        n = p.prior_segments + centre_segments
+        var_t, var_r = unit_variances(p)
+        n = p.prior_segments + np.broadcast_to(np.asarray(centre_segments, float), (3,))
         c = np.zeros(3) if centre is None else n * centre
-        scale = (stats[0] + c[0] / var_t) / (stats[1] + n / var_t)
-        normal = np.array([[stats[2], stats[3]], [stats[3], stats[4]]]) + np.eye(2) * (n / var_r)
+        scale = (stats[0] + c[0] / var_t) / (stats[1] + n[0] / var_t)
+        normal = np.array([[stats[2], stats[3]], [stats[3], stats[4]]]) + np.diag(n[1:] / var_r)
         rhs = stats[5:7] + c[1:3] / var_r
         try:
             turn_scale, bias = np.linalg.solve(normal, rhs)
@@ -223,6 +239,52 @@ class Calibration:
             heading_bias_rad_per_m=float(np.clip(bias, -p.max_abs_bias_rad_per_m,
                                                  p.max_abs_bias_rad_per_m)),
         )
+
+
+def unit_variances(params: CalibrationParams) -> tuple[float, float]:
+    """Variances of one unit segment's (1 m, 1 rad) translation and turn residuals."""
+    return (2 * params.reg_sigma_m**2 + params.walk_m2_per_m,
+            2 * params.reg_sigma_rad**2 + params.walk_rad2_per_rad)
+
+
+def between_variance(estimates: np.ndarray, weights: np.ndarray) -> float:
+    """DerSimonian-Laird: the variance of the true values behind `estimates` (k,), each known
+    to its `weights` (inverse sampling variances), beyond what their sampling noise explains."""
+    k = len(estimates)
+    if k < 2:
+        return math.inf
+    total = float(weights.sum())
+    pooled = float(weights @ estimates) / total
+    q = float(weights @ (estimates - pooled) ** 2)
+    return max(0.0, (q - (k - 1)) / (total - float(weights @ weights) / total))
+
+
+def fleet_prior_weights(teammate_stats: np.ndarray, params: CalibrationParams) -> np.ndarray:
+    """(3,) the fleet prior's weight in unit segments for the scale, turn scale and heading
+    bias: the unit segment's variance over the teammates' between-robot variance, within
+    [`fleet_prior_segments`, `fleet_prior_max_segments`]. `teammate_stats` (k, STATS) holds
+    each teammate's `own_stats`; one with no segment (or, for the turn, no turn) is left out."""
+    var_t, var_r = unit_variances(params)
+    tau2 = np.full(3, math.inf)
+    has_scale = teammate_stats[:, 1] > 0
+    if has_scale.any():
+        st = teammate_stats[has_scale]
+        tau2[0] = between_variance(st[:, 0] / st[:, 1], st[:, 1])
+    fits, precisions = [], []
+    for row in teammate_stats:
+        normal = np.array([[row[2], row[3]], [row[3], row[4]]])
+        if np.linalg.cond(normal) > 1e8:  # no turn yet, or no drive: the two not apart
+            continue
+        cov = np.linalg.inv(normal)
+        fits.append(cov @ row[5:7])
+        precisions.append(1.0 / np.diag(cov))
+    if fits:
+        est, w = np.array(fits), np.array(precisions)
+        tau2[1:] = [between_variance(est[:, j], w[:, j]) for j in (0, 1)]
+    unit = np.array([var_t, var_r, var_r])
+    with np.errstate(divide="ignore"):
+        weight = unit / tau2
+    return np.clip(weight, params.fleet_prior_segments, params.fleet_prior_max_segments)
 
 
 def segment_between(odom_from: np.ndarray, odom_to: np.ndarray, reg_from: np.ndarray,

@@ -53,7 +53,9 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
                                       fleet_weight=cfg.odom_calibration_fleet_weight,
                                       frame_pairs=cfg.odom_calibration_frame_pairs,
                                       fleet_prior_segments=(
-                                          cfg.odom_calibration_fleet_prior_segments))
+                                          cfg.odom_calibration_fleet_prior_segments),
+                                      fleet_prior_from_spread=(
+                                          cfg.odom_calibration_fleet_prior_from_spread))
         if cfg.odom_calibration else None,
         scan_odometry=ScanOdometryParams(sigma_rad=cfg.reg_scan_sigma_rad,
                                          when_hidden=cfg.reg_scan_when_hidden)
