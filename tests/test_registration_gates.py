@@ -16,7 +16,7 @@ from services.common.registration import (
     world_boxes,
 )
 from services.config import load_config
-from services.edge_server.merger import merger_params
+from services.edge_server.merger import MapMerger, merger_params
 from tests.test_edge_merger import crop, scene
 
 
@@ -90,6 +90,8 @@ def test_the_edge_config_sets_the_merger_gates_and_zero_turns_them_off() -> None
     assert off.max_mean_error == float("inf") and off.max_planar_condition == float("inf")
     scaled = merger_params(load_config(None, {"edge.merge_registrations_per_robot": "0.5"}).edge)
     assert scaled.registrations_per_robot == 0.5
+    team = MapMerger(0.05, default)  # the pairs' rule: rooms keep 2, the warehouse gets 24
+    assert [team.registration_budget(n) for n in (3, 6, 12, 24)] == [2, 2, 6, 24]
 
 
 def _brute_pairs(boxes: np.ndarray, min_volume: float) -> list[tuple[int, int, float]]:
