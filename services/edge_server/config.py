@@ -185,8 +185,8 @@ class EdgeConfig(BaseModel):
         "merger can trust\")")
     merge_registrations_per_robot_pair: float = Field(
         default=0.087, ge=0, description="... or this many per pair of robots with submaps, "
-        "where that is more (24 at 24 robots, 2 up to 6; docs/edge.md, \"Every submap "
-        "registered\")")
+        "where that is more (24 at 24 robots, 2 up to 6; docs/edge.md, \"Registrations per "
+        "update by pairs of robots\")")
     merge_odometry_sigma_m: float = Field(
         default=0.01, gt=0, description="σ x, y of the odometry edge between consecutive submaps")
     merge_odometry_sigma_per_m: float = Field(
