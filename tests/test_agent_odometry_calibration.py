@@ -400,3 +400,57 @@ def test_the_fleet_spread_sets_the_priors_weight_heavy_for_alike_wheels_light_ot
         few.add(seg)
         fixed.add(seg)
     assert few.errors == fixed.errors
+
+
+def _corners(n_corners: int) -> list[tuple[float, float, float]]:
+    """Twelve quarter turns in place (a robot looking round at its start), then 1.5 m
+    straight, a quarter turn on a 0.5 m arc (left, then right, ...), 1.5 m straight: one
+    corner per 76 ticks, as a robot drives round the ends of shelf rows."""
+    x = y = yaw = 0.0
+    poses = [(x, y, yaw)]
+    for _ in range(12 * 16):
+        yaw += 0.1 * (math.pi / 2) / 1.6
+        poses.append((x, y, yaw))
+    for i in range(n_corners):
+        w = 1.0 if i % 2 == 0 else -1.0
+        for v, omega, ticks in ((0.5, 0.0, 30), (0.5, w, 16), (0.5, 0.0, 30)):
+            for _ in range(ticks):
+                yaw += omega * 0.1 * (math.pi / 2) / 1.6  # 16 ticks make a quarter turn
+                x += v * 0.1 * math.cos(yaw)
+                y += v * 0.1 * math.sin(yaw)
+                poses.append((x, y, yaw))
+    return poses
+
+
+@pytest.mark.parametrize("turn_corrected", [True, False])
+def test_segments_round_a_corner_learn_the_wheels_scale_with_the_turns_taken_out(
+        turn_corrected: bool) -> None:
+    """Wheels 2 % long that over-turn by 5 %: each segment's raw odometry path bends more
+    than the true one, so its chord is short of 1.02 × the true chord (about 4 % here). Taken
+    from the increments with the learned turn errors out (learned first, from the turns in
+    place), the chord gives the wheels' scale; from the raw poses, far less."""
+    truth = _corners(40)
+    wheels = WheelOdometry(truth[0], OdometryNoise(scale_error=0.02, yaw_scale_error=0.05,
+                                                   heading_bias_rad_per_m=0.0),
+                           np.random.default_rng(0))
+    cal = CalibratedOdometry(CalibrationParams(turn_corrected_chords=turn_corrected))
+    for k, true in enumerate(truth):
+        raw = np.array(wheels.update(true, 0.1)[0]) if k else np.array(true)
+        cal.observe(raw)
+        # registrations after each turn in place, then only between corners
+        if (k <= 192 and k % 16 == 0) or (k > 192 and (k - 192) % 76 == 0):
+            cal.registered(np.array(true))
+    e = cal.calibration.errors
+    assert cal.calibration.n_used >= 45
+    assert abs(e.turn_scale - 0.05) < 0.005
+    if turn_corrected:
+        assert abs(e.scale - 0.02) < 0.003
+    else:
+        assert e.scale < 0.0
+
+
+def test_turn_corrected_chords_are_the_agent_config() -> None:
+    assert AgentConfig().odom_calibration_turn_corrected_chords
+    params = registration_params(AgentConfig(odom_calibration_turn_corrected_chords=False))
+    assert params.calibration is not None
+    assert not params.calibration.turn_corrected_chords

@@ -271,6 +271,11 @@ class AgentConfig(BaseModel):
         "10 000 segments when the wheels are alike, down to fleet_prior_segments when they "
         "differ; needs 5 teammates with fits (docs/agent.md, 'The fleet prior's weight from "
         "the fleet's spread')")
+    odom_calibration_turn_corrected_chords: bool = Field(
+        default=True, description="a calibration segment's odometry chord from its increments "
+        "with the learned turn errors taken out, not from its two raw poses: the wheels' "
+        "over-turning bends the raw path and shortens its chord, and the scale learned from "
+        "raw chords falls short (docs/agent.md, 'The segments' chords bent by the turns')")
     odom_calibration_max_weak_ratio: float = Field(
         default=10.0, ge=1, description="a registration ends a calibration segment only when "
         "its weakest translation direction is at most this many times weaker (variance) than "

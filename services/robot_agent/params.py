@@ -52,6 +52,8 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
                                       prior_segments=cfg.odom_calibration_prior_segments,
                                       fleet_weight=cfg.odom_calibration_fleet_weight,
                                       frame_pairs=cfg.odom_calibration_frame_pairs,
+                                      turn_corrected_chords=(
+                                          cfg.odom_calibration_turn_corrected_chords),
                                       fleet_prior_segments=(
                                           cfg.odom_calibration_fleet_prior_segments),
                                       fleet_prior_from_spread=(
