@@ -272,10 +272,12 @@ class AgentConfig(BaseModel):
         "differ; needs 5 teammates with fits (docs/agent.md, 'The fleet prior's weight from "
         "the fleet's spread')")
     odom_calibration_turn_corrected_chords: bool = Field(
-        default=True, description="a calibration segment's odometry chord from its increments "
+        default=False, description="a calibration segment's odometry chord from its increments "
         "with the learned turn errors taken out, not from its two raw poses: the wheels' "
         "over-turning bends the raw path and shortens its chord, and the scale learned from "
-        "raw chords falls short (docs/agent.md, 'The segments' chords bent by the turns')")
+        "raw chords falls short (off: the warehouse fleets learn their wheels right with it, "
+        "but its missions' BV was not lower; docs/agent.md, 'The segments' chords bent by the "
+        "turns')")
     odom_calibration_max_weak_ratio: float = Field(
         default=10.0, ge=1, description="a registration ends a calibration segment only when "
         "its weakest translation direction is at most this many times weaker (variance) than "
