@@ -36,6 +36,7 @@ from schemas import encode  # noqa: E402
 from schemas.codec import decode  # noqa: E402
 from schemas.keys import Keys  # noqa: E402
 from schemas.messages import GoalStatus, Message, RobotPose, Submap  # noqa: E402
+from services.common.heap import keep_freed_memory  # noqa: E402
 from services.config import load_config  # noqa: E402
 from services.edge_server import planner as planner_mod  # noqa: E402
 from services.edge_server.planner import EdgePlanner  # noqa: E402
@@ -60,6 +61,8 @@ def edge_inputs(keys: Keys, path: Path) -> Iterator[tuple[str, str, bytes]]:
 
 def instrument(planner: EdgePlanner, timer: StageTimer) -> None:
     """Time the plan's stages on this planner instance (and the module functions it calls)."""
+    if planner.config.merge:
+        planner.merger.update = timer.wrap("merger update", planner.merger.update)
     planner.merged.update = timer.wrap("merged map update", planner.merged.update)
     planner.grid.update = timer.wrap("merged grid update", planner.grid.update)
     planner._frontiers = timer.wrap("frontiers (2D or 3D)", planner._frontiers)
@@ -71,9 +74,11 @@ def instrument(planner: EdgePlanner, timer: StageTimer) -> None:
 
 
 def replay(rec: Path, limit: int | None, overrides: dict[str, str] | None = None,
+           prof: cProfile.Profile | None = None, profile_after: int = 0,
            ) -> tuple[StageTimer, list[float], dict, EdgePlanner]:
     """(timer, CPU s per plan, mismatches per output, the planner) of the whole recording;
-    `overrides` (dotted keys) change the mission's config (then --check fails by design)."""
+    `overrides` (dotted keys) change the mission's config (then --check fails by design).
+    `prof` runs from plan `profile_after` on (a large mission's late plans cost the most)."""
     config = load_config(rec / "run" / "config.yaml", overrides or {})
     keys = Keys(config.bus.prefix)
     planner = EdgePlanner(config.edge, config.sim.tick_s)
@@ -95,6 +100,8 @@ def replay(rec: Path, limit: int | None, overrides: dict[str, str] | None = None
     fed = 0
     ordered = sorted(range(len(inbox)), key=lambda i: inbox[i].tick)  # type: ignore[attr-defined]
     for k in range(0, last + 1, every):
+        if prof is not None and len(plan_s) == profile_after:
+            prof.enable()
         while fed < len(ordered) and inbox[ordered[fed]].tick < k:  # type: ignore[attr-defined]
             _feed(planner, inbox[ordered[fed]])
             fed += 1
@@ -151,14 +158,20 @@ def main() -> None:
                         help="compare goals and grids with the mission's, byte for byte")
     parser.add_argument("--profile", action="store_true", help="cProfile the replay")
     parser.add_argument("--limit", type=int, default=None, help="stop after this many plans")
+    parser.add_argument("--profile-after", type=int, default=0, metavar="N",
+                        help="with --profile: profile from plan N on")
+    parser.add_argument("--return-freed", action="store_true",
+                        help="leave glibc's default of unmapping large freed arrays (the edge "
+                        "keeps them: services/common/heap.py)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="change the mission's config (e.g. edge.retarget_goals=true)")
     args = parser.parse_args()
+    if not args.return_freed:
+        keep_freed_memory()  # as the edge does
     prof = cProfile.Profile() if args.profile else None
-    if prof is not None:
-        prof.enable()
     timer, plan_s, mismatches, planner = replay(args.recording, args.limit,
-                                                dict(s.split("=", 1) for s in args.set))
+                                                dict(s.split("=", 1) for s in args.set),
+                                                prof, args.profile_after)
     if prof is not None:
         prof.disable()
         pstats.Stats(prof).sort_stats("cumulative").print_stats(30)

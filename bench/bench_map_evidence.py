@@ -41,7 +41,7 @@ def voxel_evidence(planner: EdgePlanner) -> tuple[np.ndarray, np.ndarray, np.nda
     """(sorted world keys, (N, 3) points, (N,) summed point counts) of the merged map."""
     merged = planner.merged
     table = merged._observations  # every submap's voxels in world keys, sorted by key
-    table._flush()
+    table.compact()
     submap_of_uid = {uid: key for key, uid in merged._uids.items()}
     counts = np.zeros(table.keys.size, np.int64)
     for uid in np.unique(table.uid):

@@ -39,6 +39,10 @@ def test_incremental_matches_full_through_growth_and_removal():
     _check(inc, fewer)
     far = np.union1d(fewer, _cloud(rng, 300, lo=-70))  # far outside the box, negative indices
     _check(inc, far)
+    gone = far[rng.random(far.size) < 0.2]  # a rebuild that says what it added and removed
+    new = np.setdiff1d(_cloud(rng, 400, lo=5), far)
+    moved = np.union1d(np.setdiff1d(far, gone), new)
+    _check(inc, moved, added=new, removed=gone)
 
 
 def test_z_crop_returns_only_low_voxels():
@@ -48,6 +52,7 @@ def test_z_crop_returns_only_low_voxels():
 
 
 def test_incremental_obstacle_cells_equal_a_fresh_grid() -> None:
+    from services.common.geometry import T_from_xyyaw
     from services.edge_server.config import EdgeConfig
     from services.edge_server.merged_grid import MergedGrid
     from services.edge_server.merged_map import MergedMap
@@ -66,6 +71,14 @@ def test_incremental_obstacle_cells_equal_a_fresh_grid() -> None:
         fresh = MergedGrid(cfg).update(store, merged)
         assert np.array_equal(snap.cells, fresh.cells)
         assert snap.occupied.any()
+    store.apply(make_submap(1, 0, 0, 1, np.eye(4), rng.uniform([0, 0, 0], [2, 2, 0.8], (300, 3)),
+                            free))
+    for yaw in (0.3, -0.5):  # merger corrections: P* rebuilt, voxels removed and added
+        store.set_pose((0, 0), T_from_xyyaw(0.2, -0.1, yaw))
+        assert merged.update(store) and merged.removed_keys.size and merged.added_keys.size
+        snap = grid.update(store, merged)
+        fresh = MergedGrid(cfg).update(store, merged)
+        assert np.array_equal(snap.cells, fresh.cells)
 
 
 def test_a_map_growing_one_way_reallocates_the_box_a_few_times_only() -> None:

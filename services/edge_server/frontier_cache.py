@@ -116,12 +116,14 @@ class IncrementalFrontiers:
         self.full_var_m2 = full_ball_variance(self.stats.offsets) * voxel_m**2
         self.keys = np.zeros(0, np.int64)
 
-    def update(self, keys: np.ndarray, added: np.ndarray | None = None) -> PointFrontiers:
-        """Bring the sums to the sorted unique packed `keys`; `added` (optional) = the keys new
-        since the previous call when nothing was removed (saves the set difference)."""
+    def update(self, keys: np.ndarray, added: np.ndarray | None = None,
+               removed: np.ndarray | None = None) -> PointFrontiers:
+        """Bring the sums to the sorted unique packed `keys`; `added` and `removed`
+        (optional) = the keys new and gone since the previous call (saves the set
+        difference; `removed` None: none)."""
         if added is None:
             added, removed = _diff(self.keys, keys)
-        else:
+        elif removed is None:
             removed = np.zeros(0, np.int64)
         self.stats.apply(unpack(removed), -1)
         self.stats.apply(unpack(added), +1)

@@ -15,6 +15,7 @@ import numpy as np
 from services.common.arrays import column_extremes, missing_rows_2, union_rows_2, unique_rows_2
 from services.common.grid import GridSpec
 from services.common.voxels import centres, unpack
+from services.edge_server.cell_counts import CellCounts
 from services.edge_server.config import EdgeConfig
 from services.edge_server.merged_map import MergedMap
 from services.edge_server.submap_store import StoredSubmap, SubmapKey, SubmapStore
@@ -89,16 +90,15 @@ class MergedGrid:
         # per submap: (stamp, absolute free cells, the submap's free cells they came from)
         self._free_rc: dict[SubmapKey, tuple[Stamp, np.ndarray, np.ndarray]] = {}
         self._obstacle_rc: tuple[int, np.ndarray] = (-1, np.zeros((0, 2), np.int64))
-        self._stable: tuple[dict[SubmapKey, Stamp], np.ndarray] = ({}, np.zeros((0, 2), np.int64))
-        # the stable union drawn on a grid: (spec, mask), and the cells it gained since (None:
-        # it lost some, draw it again)
-        self._stable_mask: tuple[GridSpec | None, np.ndarray] = (None, np.zeros((0, 0), bool))
-        self._stable_gained: list[np.ndarray] | None = None
+        self._obstacle_counts = CellCounts()  # P*'s band voxels per cell
+        # the stable submaps' free cells counted: each one's stamp and the cells it added
+        self._stable: dict[SubmapKey, tuple[Stamp, np.ndarray]] = {}
+        self._stable_counts = CellCounts()
 
-    def _all_free_rc(self, store: SubmapStore) -> tuple[np.ndarray, list[np.ndarray]]:
-        """Absolute world cells of every submap's free cells, cached per submap version: the
-        deduplicated union of all but each robot's newest submap (those rarely change, and
-        overlapping submaps repeat most cells), and the newest submaps' cells."""
+    def _all_free_rc(self, store: SubmapStore) -> list[np.ndarray]:
+        """Absolute world cells of each robot's newest submap's free cells, and all the
+        others' counted in `_stable_counts` (those rarely change, and overlapping submaps
+        repeat most cells); cached per submap version."""
         cells: dict[SubmapKey, np.ndarray] = {}
         stamps: dict[SubmapKey, Stamp] = {}
         for sm in store.ordered():
@@ -110,9 +110,24 @@ class MergedGrid:
             cells[sm.key], stamps[sm.key] = cached[1], stamp
         newest = {robot: max(k for k in cells if k[0] == robot) for robot in {k[0] for k in cells}}
         stable = {k: stamps[k] for k in sorted(cells) if k not in newest.values()}
-        if stable != self._stable[0]:
-            self._stable = (stable, self._stable_union(stable, cells))
-        return self._stable[1], [cells[k] for k in sorted(newest.values())]
+        self._count_stable(stable, cells)
+        return [cells[k] for k in sorted(newest.values())]
+
+    def _count_stable(self, stable: dict[SubmapKey, Stamp],
+                      cells: dict[SubmapKey, np.ndarray]) -> None:
+        """Bring the counts to the `stable` submaps' cells: a submap that left the set, moved
+        or grew takes its old cells out, and one that joined, moved or grew puts its
+        current cells in."""
+        counts = self._stable_counts
+        for key in sorted(self._stable):
+            stamp, rc = self._stable[key]
+            if stable.get(key) != stamp:
+                counts.add(rc, -1)
+                del self._stable[key]
+        for key, stamp in stable.items():
+            if key not in self._stable:
+                counts.add(cells[key], +1)
+                self._stable[key] = (stamp, cells[key])
 
     def _world_free(self, sm: StoredSubmap,
                     cached: tuple[Stamp, np.ndarray, np.ndarray] | None) -> np.ndarray:
@@ -124,37 +139,11 @@ class MergedGrid:
         new = missing_rows_2(sm.free_cells, cached[2])
         return union_rows_2(cached[1], world_cells(free_cells_world(sm, new), res))
 
-    def _stable_union(self, stable: dict[SubmapKey, Stamp],
-                      cells: dict[SubmapKey, np.ndarray]) -> np.ndarray:
-        """The deduplicated cells of the `stable` submaps. A submap's free cells only grow
-        while its pose and cell size stay (SubmapStore.apply), so when no submap left the set
-        or moved, the cached union only takes the changed submaps' cells in."""
-        before, union = self._stable
-        grown = before.keys() <= stable.keys() and all(
-            stable[k][1:] == stamp[1:] for k, stamp in before.items())
-        if not grown:
-            self._stable_gained = None
-            return (unique_rows_2(np.concatenate([cells[k] for k in stable])) if stable
-                    else np.zeros((0, 2), np.int64))
-        changed = np.concatenate([cells[k] for k, stamp in stable.items()
-                                  if before.get(k) != stamp])
-        if self._stable_gained is not None:
-            self._stable_gained.append(changed)
-        return union_rows_2(union, changed)
-
     def _free_mask(self, spec: GridSpec, newest: list[np.ndarray]) -> np.ndarray:
-        """The free cells of every submap on the grid `spec`: the stable union's drawing
-        (kept while the grid's geometry stays, with the cells it gained drawn in), then the
-        newest submaps' cells."""
-        drawn_spec, mask = self._stable_mask
-        if drawn_spec != spec or self._stable_gained is None:
-            mask = np.zeros(spec.shape, bool)
-            _mark(mask, spec, self._stable[1])
-        else:
-            for rc in self._stable_gained:
-                _mark(mask, spec, rc)
-        self._stable_mask, self._stable_gained = (spec, mask), []
-        free = mask.copy()
+        """The free cells of every submap on the grid `spec`: the stable ones' counts, then
+        the newest submaps' cells."""
+        free = np.zeros(spec.shape, bool)
+        self._stable_counts.draw(free, spec)
         for rc in newest:
             _mark(free, spec, rc)
         return free
@@ -166,6 +155,21 @@ class MergedGrid:
         if rc.shape[0] == 0:
             return np.zeros((0, 2))
         return (np.stack(column_extremes(rc))[:, ::-1] + 0.5) * res
+
+    def _count_obstacles(self, merged: MergedMap) -> np.ndarray:
+        """Absolute cells under P*'s voxels in the obstacle band, counted per voxel: after
+        one update only the voxels it added and removed are counted in and out (P* is
+        large), else all of them again."""
+        res, counts = self.config.grid_resolution_m, self._obstacle_counts
+        if 0 <= self._obstacle_rc[0] == merged.version - 1:
+            for keys, sign in ((merged.removed_keys, -1), (merged.added_keys, +1)):
+                xy = self._band_xy(centres(unpack(keys), merged.voxel_m))
+                counts.add(np.floor(xy[:, ::-1] / res).astype(np.int64), sign)
+        else:
+            self._obstacle_counts = counts = CellCounts()
+            xy = self._band_xy(merged.centres_world)
+            counts.add(np.floor(xy[:, ::-1] / res).astype(np.int64), +1)
+        return counts.held()
 
     def _band_xy(self, points_world: np.ndarray) -> np.ndarray:
         z = points_world[:, 2]
@@ -186,19 +190,13 @@ class MergedGrid:
     ) -> GridSnapshot | None:
         """The grid for the current data; `extra_xy` (e.g. robot positions) must fit too."""
         res = self.config.grid_resolution_m
-        stable_rc, newest_rc = self._all_free_rc(store)
+        newest_rc = self._all_free_rc(store)
         if self._obstacle_rc[0] != merged.version:
-            added = getattr(merged, "added_keys", None)
-            if self._obstacle_rc[0] == merged.version - 1 and added is not None:
-                # one delta since the last grid: only the new voxels' band cells (P* is large)
-                new_rc = world_cells(self._band_xy(centres(unpack(added), merged.voxel_m)), res)
-                rc = union_rows_2(self._obstacle_rc[1], new_rc)
-            else:
-                rc = world_cells(self._band_xy(merged.centres_world), res)
-            self._obstacle_rc = (merged.version, rc)
+            self._obstacle_rc = (merged.version, self._count_obstacles(merged))
         obstacle_rc = self._obstacle_rc[1]
         if self.config.grid_bounds_m is None:
-            xy = [self._extremes_xy(rc, res) for rc in [stable_rc, *newest_rc, obstacle_rc]]
+            held = self._stable_counts.extremes()
+            xy = [self._extremes_xy(rc, res) for rc in [held, *newest_rc, obstacle_rc]]
             xy += [extra_xy] if extra_xy is not None else []
             self.bounds = grow_bounds(
                 self.bounds, np.concatenate(xy), self.config.grid_margin_m, self.config.grid_chunk_m

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from services.common.arrays import insert_rows
+from services.common.arrays import insert_rows, unique_sorted
 from services.common.geometry import transform_points
 from services.common.voxels import centres, pack, unpack, voxel_indices
 from services.edge_server.observations import ObservationTable
@@ -139,8 +139,9 @@ class MergedMap:
         self.cloud_version = 0  # bumps whenever a cloud would differ (keys or points)
         self.rebuilt_at = 0  # cloud_version of the last rebuild (voxels may have gone)
         self.added_at = np.zeros(0, np.int32)  # per voxel: cloud_version it was added at
-        # keys the last update inserted; None after a rebuild (voxels may have been removed)
-        self.added_keys: np.ndarray | None = np.zeros(0, np.int64)
+        # sorted keys the last update inserted and removed (only a rebuild removes any)
+        self.added_keys: np.ndarray = np.zeros(0, np.int64)
+        self.removed_keys: np.ndarray = np.zeros(0, np.int64)
         self._robot_maps: dict[int, _RobotMap] = {}
         self._observations = ObservationTable()  # every part's voxels, sorted by key
 
@@ -150,13 +151,13 @@ class MergedMap:
         if store.version == self._store_version:
             return False
         self._store_version = store.version
-        moved: set[int] = set()
+        moved: dict[int, np.ndarray] = {}  # uid → the world keys the part held
         deltas: list[tuple[np.ndarray, ...]] = []
         for sm in store.ordered():
             part = self._parts.get(sm.key)
             if part is None or part.pose_version != sm.pose_version:
                 if part is not None:
-                    moved.add(part.uid)
+                    moved[part.uid] = part.keys_world
                 uid = self._uids.setdefault(sm.key, len(self._uids))
                 part = _WorldPart(sm.pose_version, 0, np.zeros(0, np.int64),
                                   np.zeros((0, 3), np.uint8), np.zeros(0, np.int64), uid)
@@ -179,9 +180,9 @@ class MergedMap:
         if self._snapshot_points(store, v):
             self._points = None
             self.cloud_version = v
+        self.removed_keys = np.zeros(0, np.int64)
         if moved:
-            self._rebuild()
-            self.added_keys = None
+            self.added_keys, self.removed_keys = self._rebuild()
             self.added_at = np.full(self.keys.size, v, np.int32)
             self.rebuilt_at = v
         elif deltas:
@@ -219,20 +220,56 @@ class MergedMap:
         self._points_version += taken
         return taken
 
-    def _rebuild(self) -> None:
-        """Every voxel's first observer again, from the observations kept sorted."""
-        by_uid = sorted(self._parts.values(), key=lambda p: p.uid)
+    def _rebuild(self) -> tuple[np.ndarray, np.ndarray]:
+        """The first observer of every voxel whose observations changed, from the
+        observations kept sorted (observations.py); the other voxels keep theirs. Returns
+        the keys inserted and the keys removed."""
         submap_of_uid = np.array([0] * len(self._uids), np.int64)
         for key, uid in self._uids.items():
             submap_of_uid[uid] = key[1]
-        self.keys, rows = self._observations.first_observers(submap_of_uid)
-        obs = self._observations
-        self.robot_ids = (obs.rank[rows] & 255).astype(np.uint8)
-        self.src_uid, self.src_idx = obs.uid[rows], obs.idx[rows]
-        offsets = np.cumsum([0] + [p.colors.shape[0] for p in by_uid])[:-1]
-        colors = np.concatenate([p.colors for p in by_uid]) if by_uid else np.zeros((0, 3),
-                                                                                  np.uint8)
-        self.colors = colors[offsets[self.src_uid] + self.src_idx]
+        ch = self._observations.first_observers(submap_of_uid)
+        at = np.searchsorted(self.keys, ch.keys)
+        known = np.zeros(ch.keys.size, bool)
+        inside = at < self.keys.size
+        known[inside] = self.keys[at[inside]] == ch.keys[inside]
+        now = known & ch.held
+        # copies: views handed out earlier (cloud_view) keep the map they were taken from
+        self.robot_ids, self.src_uid, self.src_idx, self.colors = (
+            a.copy() for a in (self.robot_ids, self.src_uid, self.src_idx, self.colors))
+        self.robot_ids[at[now]] = (ch.rank[now] & 255).astype(np.uint8)
+        self.src_uid[at[now]], self.src_idx[at[now]] = ch.uid[now], ch.idx[now]
+        self.colors[at[now]] = self._part_colors(ch.uid[now], ch.idx[now])
+        gone = known & ~ch.held
+        if gone.any():
+            keep = np.ones(self.keys.size, bool)
+            keep[at[gone]] = False
+            self.keys, self.robot_ids, self.src_uid, self.src_idx = (
+                a[keep] for a in (self.keys, self.robot_ids, self.src_uid, self.src_idx))
+            self.colors = self.colors[keep]
+        new = ~known & ch.held
+        if new.any():
+            at = np.searchsorted(self.keys, ch.keys[new])
+            self.keys = np.insert(self.keys, at, ch.keys[new])
+            self.robot_ids = np.insert(self.robot_ids, at, (ch.rank[new] & 255).astype(np.uint8))
+            self.src_uid = np.insert(self.src_uid, at, ch.uid[new])
+            self.src_idx = np.insert(self.src_idx, at, ch.idx[new])
+            self.colors = insert_rows(self.colors, at, self._part_colors(ch.uid[new],
+                                                                         ch.idx[new]))
+        return ch.keys[new], ch.keys[gone]
+
+    def _part_colors(self, src_uid: np.ndarray, src_idx: np.ndarray) -> np.ndarray:
+        """(N, 3) uint8 colours the parts took for the voxels at (uid, index)."""
+        if src_uid.size == 0:
+            return np.zeros((0, 3), np.uint8)
+        by_uid = {p.uid: p for p in self._parts.values()}
+        used = unique_sorted(src_uid)
+        offsets = np.zeros(int(used[-1]) + 1, np.int64)
+        blocks, at = [], 0
+        for uid in used.tolist():
+            blocks.append(by_uid[uid].colors)
+            offsets[uid] = at
+            at += by_uid[uid].colors.shape[0]
+        return np.concatenate(blocks)[offsets[src_uid] + src_idx]
 
     def _merge_delta(
         self, keys: np.ndarray, colors: np.ndarray, ticks: np.ndarray, robots: np.ndarray,

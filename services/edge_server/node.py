@@ -32,6 +32,7 @@ from schemas.messages import (
 )
 from services.common.access import identity
 from services.common.bus import Bus, Inbound, Presence, connect
+from services.common.heap import keep_freed_memory
 from services.common.inventory import inventory_of
 from services.common.signals import stop_on_signals
 from services.config import SpacemapConfig
@@ -176,6 +177,7 @@ class EdgeNode:
 
 def main(config: SpacemapConfig) -> None:
     """Run the edge server until SIGTERM or SIGINT."""
+    keep_freed_memory()  # a plan frees and allocates arrays of hundreds of MB
     stop = stop_on_signals()
     with connect(config.bus, identity("edge")) as bus:
         node = EdgeNode(bus, config)

@@ -190,7 +190,7 @@ class EdgePlanner:
         step = self.merged.version == self._alg1_version + 1
         added = self.merged.added_keys if step else None  # else: set difference
         if self.merged.version != self._alg1_version or self._alg1_version < 0:
-            self._pf = self.alg1.update(self.merged.keys, added)
+            self._pf = self.alg1.update(self.merged.keys, added, self.merged.removed_keys)
             self._alg1_version = self.merged.version
         return self._pf
 
