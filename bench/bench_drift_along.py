@@ -7,6 +7,8 @@ driven it is a scale-like drift (% per metre). Ground truth is read here, in the
 place, never by an agent.
 
     .venv/bin/python bench/bench_drift_along.py RUN_DIR...
+    # the same per window of sim time (s): where in the mission the estimates ran ahead
+    .venv/bin/python bench/bench_drift_along.py --windows 0,25,50,100 RUN_DIR...
 """
 
 from __future__ import annotations
@@ -29,11 +31,43 @@ def along_track(gt_xy: np.ndarray, est_xy: np.ndarray) -> tuple[float, float, fl
     return along, across, float(length.sum())
 
 
+def windowed_growth(gt: np.ndarray, est: np.ndarray, edges_s: list[float],
+                    ) -> list[tuple[float, float]]:
+    """(along-track growth m, distance m) of one robot per window [edges[i], edges[i+1]) of
+    sim time (the last window open-ended), from (N, 8) TUM rows."""
+    out = []
+    for lo, hi in zip(edges_s, [*edges_s[1:], np.inf], strict=True):
+        idx = np.flatnonzero((gt[:, 0] >= lo) & (gt[:, 0] < hi))
+        if len(idx) < 2:
+            out.append((0.0, 0.0))
+            continue
+        idx = np.append(idx, min(idx[-1] + 1, len(gt) - 1))  # the step out of the window
+        along, _, dist = along_track(gt[idx, 1:3], est[idx, 1:3])
+        out.append((along, dist))
+    return out
+
+
+def _print_windows(run: Path, edges_s: list[float]) -> None:
+    sums = np.zeros((len(edges_s), 2))
+    for gt_path in sorted(run.glob("trajectory_*_gt.tum")):
+        est_path = gt_path.with_name(gt_path.name.replace("_gt", "_est"))
+        gt, est = np.loadtxt(gt_path, ndmin=2), np.loadtxt(est_path, ndmin=2)
+        n = min(len(gt), len(est))
+        sums += np.array(windowed_growth(gt[:n], est[:n], edges_s))
+    cells = [f"{lo:g}-{hi:g} s {100 * a / max(d, 1e-9):+.2f} % of {d:.0f} m"
+             for (a, d), lo, hi in zip(sums, edges_s, [*edges_s[1:], np.inf], strict=True)]
+    print(f"{run.name}: along-track growth, fleet, per window: " + "; ".join(cells))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("runs", type=Path, nargs="+")
+    ap.add_argument("--windows", default="", help="comma-separated window starts, sim s")
     args = ap.parse_args()
     for run in args.runs:
+        if args.windows:
+            _print_windows(run, [float(v) for v in args.windows.split(",")])
+            continue
         growth, driven = [], []
         for gt_path in sorted(run.glob("trajectory_*_gt.tum"),
                               key=lambda p: int(p.stem.split("_")[1])):

@@ -208,6 +208,14 @@ class AgentConfig(BaseModel):
         default=1.0, ge=1, description="... for the part of that ratio above this only (ratio "
         "r ≤ knee: σ² × r; above: × knee·(r / knee)^power): the rooms' mildly lopsided "
         "registrations keep power 1's weight, the aisles' (r ~ 100) get the wheels")
+    reg_weak_inflation_power_uncalibrated: float = Field(
+        default=0.0, ge=0, le=3, description="> 0: this power instead until the fleet knows "
+        "its wheels' scale from `reg_weak_inflation_calibrated_segments` pooled unit "
+        "segments: uncalibrated wheels read as long as they were made, and the first "
+        "minute's map, stretched by them, is what later frames register against")
+    reg_weak_inflation_calibrated_segments: float = Field(
+        default=40.0, ge=0, description="... the fleet's pooled calibration segments (1 m "
+        "each, this robot's and the teammates') after which the wheels count as calibrated")
     reg_coupled_length_m: float = Field(
         default=0.0, ge=0, description="> 0: a registration's covariance from its whole planar "
         "information, yaw compared at this lever arm (drift_filter.measurement_cov)")

@@ -39,6 +39,10 @@ class FilterParams:
     # 1 a registration's weak direction (along an aisle) counts for less against the wheels
     weak_inflation_power: float = 1.0
     weak_inflation_knee: float = 1.0  # ... only for the part of the ratio above this
+    # ... but this power (0 = the same) until the wheels' scale is known from this many unit
+    # segments pooled over the fleet: wheels not yet calibrated read as long as they are made
+    weak_inflation_power_uncalibrated: float = 0.0
+    calibrated_segments: float = 0.0
     chi2_gate: float = 16.27  # 3 dof, p = 0.999
     coupled_length_m: float = 0.0  # > 0: R from the whole planar information (see below)
     # re-acquisition: this many gate-rejected registrations in a row (0 = never) that agree

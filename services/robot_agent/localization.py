@@ -10,6 +10,7 @@ so the edge's corrections (T_world_submap) give T_world_loc.
 
 from __future__ import annotations
 
+import logging
 import math
 from collections import Counter
 from dataclasses import replace
@@ -42,6 +43,8 @@ from services.robot_agent.registrar import (
 from services.robot_agent.scan_odometry import ScanOdometry
 from services.robot_agent.wall_heading import WallHeading
 
+log = logging.getLogger(__name__)
+
 
 class Localizer:
     """T_loc_odom, the drift registration found: T_loc_base = T_loc_odom · T_odom_base.
@@ -60,6 +63,8 @@ class Localizer:
         # weakest / strongest translation information of the last frame GICP aligned (1 until
         # one is): low along an aisle or one wall
         self.info_ratio = 1.0
+        # frames fused at `weak_inflation_power_uncalibrated` so far; −1 once calibrated
+        self.frames_uncalibrated = 0
         # each rejected registration's T_loc_base and its frame's T_odom_base (x, y, yaw)
         self._rejected: list[tuple[np.ndarray, np.ndarray]] = []
         # the frame (cloud, k-d tree) the open calibration segment started at
@@ -120,13 +125,29 @@ class Localizer:
         if hidden:
             outcome = RegistrationOutcome(guess, False, "hidden by teammates")
         elif filt is not None:
-            outcome = self._filtered(frame, guess, filt, self._align_cloud(points_base))
+            outcome = self._filtered(frame, guess, self._fusion_params(filt),
+                                     self._align_cloud(points_base))
         else:
             outcome = self.registrar.register(points_base, guess, T_odom_base)
         self.outcomes["accepted" if outcome.accepted else outcome.reason] += 1
         # planar() re-orthonormalises, so rounding cannot pile up over thousands of frames
         self.T_loc_odom = planar(outcome.T_loc_base @ invert(T_odom_base))
         return outcome
+
+    def _fusion_params(self, filt: FilterParams) -> FilterParams:
+        """The filter's parameters for this frame's registration: while the fleet has not
+        yet learned its wheels' scale (`calibrated_segments`), a registration's weak
+        direction keeps the uncalibrated power's weight against them."""
+        if filt.weak_inflation_power_uncalibrated <= 0 or self.odometry is None \
+                or self.frames_uncalibrated < 0:
+            return filt
+        if self.odometry.calibration.pooled_segments() >= filt.calibrated_segments:
+            log.info("wheels calibrated after %d frames: registrations' weak directions at "
+                     "power %g from now on", self.frames_uncalibrated, filt.weak_inflation_power)
+            self.frames_uncalibrated = -1
+            return filt
+        self.frames_uncalibrated += 1
+        return replace(filt, weak_inflation_power=filt.weak_inflation_power_uncalibrated)
 
     def _wall_heading(self, cloud: small_gicp.PointCloud, guess: np.ndarray,
                       T_odom_base: np.ndarray) -> np.ndarray:

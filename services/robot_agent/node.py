@@ -90,9 +90,10 @@ def handle(
                      bus.bytes_out[key] / 1000.0 / sim_s, dict(core.localizer.outcomes))
             if core.localizer.odometry is not None:
                 cal = core.localizer.odometry.calibration
-                log.info("robot %d tick %d: odometry errors %s from %d segments (%d left out); "
-                         "fleet prior %s segments", core.robot_id, msg.tick, cal.errors,
-                         cal.n_used, cal.n_rejected, cal.fleet_prior_weight)
+                log.info("robot %d tick %d: odometry errors %s from %d segments (%d left out, "
+                         "%.1f pooled over the fleet); fleet prior %s segments", core.robot_id,
+                         msg.tick, cal.errors, cal.n_used, cal.n_rejected,
+                         cal.pooled_segments(), cal.fleet_prior_weight)
             walls = core.localizer.walls
             if walls is not None:
                 log.info("robot %d tick %d: wall heading: world direction %s (own %s, %d "

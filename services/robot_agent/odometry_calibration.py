@@ -167,6 +167,12 @@ class Calibration:
         return np.array([self._scale_num, self._scale_den, n[0, 0], n[0, 1], n[1, 1],
                          r[0], r[1]])
 
+    def pooled_segments(self) -> float:
+        """This robot's and its teammates' segments so far, in unit (1 m) segments of the
+        scale's evidence: how well the fleet knows its wheels' scale yet."""
+        var_t, _ = unit_variances(self.params)
+        return float((self._scale_den + self._fleet[1]) * var_t)
+
     def set_fleet(self, teammates_stats: np.ndarray) -> None:
         """The sum of the teammates' `own_stats`; weighed by `fleet_weight` in the fit."""
         self._fleet = np.asarray(teammates_stats, float).reshape(STATS).copy()

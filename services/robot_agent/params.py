@@ -41,6 +41,9 @@ def registration_params(cfg: AgentConfig) -> RegistrationParams:
                             r_m=cfg.reg_sigma_m, r_rad=cfg.reg_sigma_rad,
                             weak_inflation_power=cfg.reg_weak_inflation_power,
                             weak_inflation_knee=cfg.reg_weak_inflation_knee,
+                            weak_inflation_power_uncalibrated=(
+                                cfg.reg_weak_inflation_power_uncalibrated),
+                            calibrated_segments=cfg.reg_weak_inflation_calibrated_segments,
                             full_overlap_frac=cfg.reg_full_overlap_frac,
                             full_inliers=cfg.reg_full_inliers,
                             max_jump_sigmas=cfg.reg_max_jump_sigmas,
