@@ -55,10 +55,17 @@ def test_the_uncalibrated_power_holds_until_the_fleet_has_its_segments_then_neve
     assert loc._fusion_params(filt) is filt
 
 
-def test_off_by_default_and_the_power_is_what_weighs_an_aisles_registration() -> None:
+def test_power_1_by_default_and_0_turns_it_off() -> None:
     loc = Localizer(registration_params(AgentConfig()))
     filt = loc.registrar.params.filter
-    assert loc._fusion_params(filt) is filt
+    assert filt.calibrated_segments == 40.0
+    assert loc._fusion_params(filt).weak_inflation_power == 1.0
+    off = _localizer(0.0, 40.0)
+    assert off._fusion_params(off.registrar.params.filter) is off.registrar.params.filter
+
+
+def test_the_power_is_what_weighs_an_aisles_registration() -> None:
+    filt = _localizer(0.0, 40.0).registrar.params.filter
     early = _localizer(1.0, 40.0)
     early_filt = early._fusion_params(early.registrar.params.filter)
     # an aisle: along x a hundred times weaker than across (small_gicp's H: rx ry rz tx ty tz)

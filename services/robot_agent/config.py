@@ -208,8 +208,11 @@ class AgentConfig(BaseModel):
         default=1.0, ge=1, description="... for the part of that ratio above this only (ratio "
         "r ≤ knee: σ² × r; above: × knee·(r / knee)^power): the rooms' mildly lopsided "
         "registrations keep power 1's weight, the aisles' (r ~ 100) get the wheels")
+    # 1 since the fifty-fourth session (docs/agent.md, "The first minute's wheels"):
+    # warehouse 300 s, seeds 0-4, BV median 0.084 → 0.059 %, worst 1.415 → 0.798 %, ATE 5.68
+    # → 4.85 cm; the rooms' 15 missions all at BV 0
     reg_weak_inflation_power_uncalibrated: float = Field(
-        default=0.0, ge=0, le=3, description="> 0: this power instead until the fleet knows "
+        default=1.0, ge=0, le=3, description="> 0: this power instead until the fleet knows "
         "its wheels' scale from `reg_weak_inflation_calibrated_segments` pooled unit "
         "segments: uncalibrated wheels read as long as they were made, and the first "
         "minute's map, stretched by them, is what later frames register against")
