@@ -450,8 +450,8 @@ def test_segments_round_a_corner_learn_the_wheels_scale_with_the_turns_taken_out
 
 
 def test_turn_corrected_chords_are_the_agent_config() -> None:
-    assert not AgentConfig().odom_calibration_turn_corrected_chords
-    assert not registration_params(AgentConfig()).calibration.turn_corrected_chords
-    params = registration_params(AgentConfig(odom_calibration_turn_corrected_chords=True))
+    assert AgentConfig().odom_calibration_turn_corrected_chords
+    assert registration_params(AgentConfig()).calibration.turn_corrected_chords
+    params = registration_params(AgentConfig(odom_calibration_turn_corrected_chords=False))
     assert params.calibration is not None
-    assert params.calibration.turn_corrected_chords
+    assert not params.calibration.turn_corrected_chords

@@ -46,6 +46,40 @@ def test_distance_fields_share_one_graph() -> None:
     assert np.isinf(stack[3]).all()
 
 
+def _reference_fields(grid: np.ndarray, starts: list[tuple[int, int]]) -> np.ndarray:
+    """Dijkstra on a graph built edge by edge in COO form (how the planner built it before
+    its direct CSR build), for the exact comparison below."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    H, W = grid.shape
+    src, dst, cost = [], [], []
+    for r, c in np.argwhere(grid):
+        for dr, dc in [(-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (-1, 1), (1, -1), (1, 1)]:
+            rr, cc = r + dr, c + dc
+            if not (0 <= rr < H and 0 <= cc < W and grid[rr, cc]):
+                continue
+            if dr and dc and not (grid[r + dr, c] and grid[r, c + dc]):
+                continue
+            src.append(r * W + c)
+            dst.append(rr * W + cc)
+            cost.append(np.sqrt(2.0) if dr and dc else 1.0)
+    graph = coo_matrix((cost, (src, dst)), shape=(H * W, H * W)).tocsr()
+    return dijkstra(graph, indices=[r * W + c for r, c in starts]).reshape(len(starts), H, W)
+
+
+def test_distance_fields_equal_a_graph_built_edge_by_edge() -> None:
+    rng = np.random.default_rng(11)
+    for _ in range(25):
+        H, W = (int(n) for n in rng.integers(1, 30, 2))
+        grid = rng.random((H, W)) < rng.uniform(0.4, 0.95)
+        cells = np.argwhere(grid)
+        if len(cells) == 0:
+            continue
+        starts = [tuple(map(int, cells[i])) for i in rng.integers(0, len(cells), 3)]
+        assert np.array_equal(distance_fields(grid, starts), _reference_fields(grid, starts))
+
+
 def test_inflate_and_nearest() -> None:
     occupied = np.zeros((11, 11), dtype=bool)
     occupied[5, 5] = True

@@ -56,21 +56,30 @@ def dilate_disk(mask: np.ndarray, r2: int) -> np.ndarray:
     return out
 
 
-def _edges(traversable: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Sources, targets and costs of every allowed move between traversable cells."""
+def _graph(traversable: np.ndarray) -> csr_matrix:
+    """The allowed moves between traversable cells as a CSR matrix over flat cell indices,
+    built row by row directly (each cell's moves in `_MOVES` order): no COO-to-CSR sort, which
+    cost 0.5 s of a 0.6 s build on the warehouse's 600k-cell grid (bench/bench_planning.py).
+    Dijkstra's distances do not depend on the order of a row's edges."""
     H, W = traversable.shape
-    idx = np.arange(H * W).reshape(H, W)
-    src, dst, cost = [], [], []
-    for dr, dc, c in _MOVES:
-        r0, r1 = max(0, -dr), H - max(0, dr)
-        c0, c1 = max(0, -dc), W - max(0, dc)
-        ok = traversable[r0:r1, c0:c1] & traversable[r0 + dr : r1 + dr, c0 + dc : c1 + dc]
+    padded = np.pad(traversable, 1)
+
+    def shifted(dr: int, dc: int) -> np.ndarray:
+        return padded[1 + dr : 1 + dr + H, 1 + dc : 1 + dc + W]
+
+    moves = []
+    for dr, dc, _ in _MOVES:
+        ok = traversable & shifted(dr, dc)
         if dr and dc:  # no corner cutting
-            ok &= traversable[r0 + dr : r1 + dr, c0:c1] & traversable[r0:r1, c0 + dc : c1 + dc]
-        src.append(idx[r0:r1, c0:c1][ok])
-        dst.append(idx[r0 + dr : r1 + dr, c0 + dc : c1 + dc][ok])
-        cost.append(np.full(int(ok.sum()), c))
-    return np.concatenate(src), np.concatenate(dst), np.concatenate(cost)
+            ok &= shifted(dr, 0) & shifted(0, dc)
+        moves.append(ok)
+    ok = np.stack(moves, axis=-1).reshape(H * W, len(_MOVES))
+    step = np.array([dr * W + dc for dr, dc, _ in _MOVES])
+    targets = (np.arange(H * W)[:, None] + step[None, :])[ok]
+    costs = np.broadcast_to(np.array([c for _, _, c in _MOVES]), ok.shape)[ok]
+    indptr = np.zeros(H * W + 1, np.int64)
+    np.cumsum(ok.sum(axis=1), out=indptr[1:])
+    return csr_matrix((costs, targets, indptr), shape=(H * W, H * W))
 
 
 def distance_fields(traversable: np.ndarray, starts_rc: list[tuple[int, int]]) -> np.ndarray:
@@ -86,8 +95,7 @@ def distance_fields(traversable: np.ndarray, starts_rc: list[tuple[int, int]]) -
     ]
     if not valid:
         return out
-    src, dst, cost = _edges(traversable)
-    graph = csr_matrix((cost, (src, dst)), shape=(H * W, H * W))
+    graph = _graph(traversable)
     indices = [starts_rc[k][0] * W + starts_rc[k][1] for k in valid]
     out[valid] = dijkstra(graph, indices=indices).reshape(len(valid), H, W)
     return out

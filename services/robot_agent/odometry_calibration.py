@@ -89,7 +89,7 @@ class CalibrationParams:
     # turn (a 90° corner between two 2.5 m legs: 0.8 % short at a 1 % turn scale), so the
     # scale fitted from raw chords falls short of the wheels' (warehouse recording: 1.86 %
     # of 2 % from the truth's chords, 1.56 % over 30 s windows; docs/agent.md)
-    turn_corrected_chords: bool = False
+    turn_corrected_chords: bool = True
 
 
 @dataclass(frozen=True)
