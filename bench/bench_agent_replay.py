@@ -137,6 +137,9 @@ def instrument(core: AgentCore, timer: StageTimer) -> None:
     core.on_grid = timer.wrap("edge grid merge", core.on_grid)
     core.mapper.take_delta = timer.wrap("submap deltas", core.mapper.take_delta)
     agent_mod.filter_mask = timer.wrap("DRF mask (DBSCAN)", agent_mod.filter_mask)
+    walls = core.localizer.walls
+    if walls is not None:
+        walls.update = timer.wrap("- registration: wall heading", walls.update)
     reg = core.localizer.registrar
     for attr in ("_cloud", "align", "insert"):
         setattr(reg, attr, timer.wrap(f"- registration: {attr.strip('_')}", getattr(reg, attr)))
