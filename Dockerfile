@@ -54,7 +54,8 @@ RUN --mount=type=bind,source=pyproject.toml,target=/src/pyproject.toml \
     cp -r /src /tmp/src; \
     python3.11 ${pip:--m pip} --python /opt/venv/bin/python install $idx --no-deps \
       --find-links /wheels /tmp/src; \
-    rm -rf /tmp/src /root/.cache
+    rm -rf /tmp/src /root/.cache; \
+    /opt/venv/bin/python -m services.common.grid_search
 
 ENV PATH=/opt/venv/bin:$PATH \
     PYTHONUNBUFFERED=1 \

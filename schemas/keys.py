@@ -147,7 +147,8 @@ def role_keys(keys: Keys, role: str, ident: int, robots: int) -> RoleKeys:
         )
     if role == "monitor":  # the launcher's recorder, sampler and live view; the CLI tools
         return RoleKeys(
-            subscribe=(keys.clock(), keys.map_grid(), keys.map_frontiers(), keys.gt_pose("*"),
+            subscribe=(keys.clock(), keys.map_grid(), keys.map_frontiers(), keys.edge_ack(),
+                       keys.gt_pose("*"),
                        *(keys.any_robot(t) for t in ("pose", "goal", "goal_status", "submap",
                                                      "cmd_vel", "rgbd"))),
             query=(keys.map_cloud(), keys.map_robot_grid(), keys.map_inventory(),

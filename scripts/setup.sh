@@ -24,4 +24,7 @@ fi
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e ".[dev]"
+# the edge's compiled Dijkstra (numba) is compiled once here and cached beside its source,
+# not in a mission's first plan
+.venv/bin/python -m services.common.grid_search
 echo "setup: done ($(.venv/bin/python --version))"

@@ -5,9 +5,12 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from services.common import planning
 from services.common.grid import GridSpec
 from services.common.planning import (
+    COMPILED_MIN_WORK,
     astar,
+    compiled_distance_fields,
     dilate_disk,
     disk,
     distance_field,
@@ -16,6 +19,7 @@ from services.common.planning import (
     nearest_traversable,
     path_length,
     reachable,
+    scipy_distance_fields,
 )
 
 
@@ -77,7 +81,29 @@ def test_distance_fields_equal_a_graph_built_edge_by_edge() -> None:
         if len(cells) == 0:
             continue
         starts = [tuple(map(int, cells[i])) for i in rng.integers(0, len(cells), 3)]
-        assert np.array_equal(distance_fields(grid, starts), _reference_fields(grid, starts))
+        reference = _reference_fields(grid, starts)
+        assert np.array_equal(distance_fields(grid, starts), reference)
+        assert np.array_equal(compiled_distance_fields(grid, starts), reference)
+
+
+def test_distance_fields_equal_scipys_dijkstra_on_large_grids() -> None:
+    """The compiled search (which large searches take) against scipy's on grids whose fronts
+    outgrow its first buffers (an open 520 × 520 square) and on long corridors (hundreds of
+    buckets), bit for bit."""
+    rng = np.random.default_rng(5)
+    open_square = np.ones((520, 520), bool)
+    aisles = np.ones((600, 450), bool)
+    for c in range(10, 440, 12):
+        aisles[20:580, c : c + 5] = False
+    aisles[rng.random(aisles.shape) < 0.03] = False
+    for grid in (open_square, aisles):
+        cells = np.argwhere(grid)
+        starts = [tuple(map(int, cells[i])) for i in rng.integers(0, len(cells), 3)]
+        starts.append((-1, 4))  # outside: all inf
+        assert grid.size * len(starts) >= COMPILED_MIN_WORK  # the compiled search's size
+        fields = distance_fields(grid, starts)
+        assert np.array_equal(fields, scipy_distance_fields(grid, starts))
+        assert np.isinf(fields[-1]).all() and np.isfinite(fields[0]).sum() > 0.9 * grid.sum()
 
 
 def test_inflate_and_nearest() -> None:
@@ -172,3 +198,48 @@ def test_astar_takes_the_same_path_as_textbook_astar() -> None:
         assert (ref is None) == (got is None)
         if ref is not None:
             assert np.array_equal(ref, got) and got.dtype == np.int64
+
+
+def test_the_compiled_astar_takes_the_same_path(monkeypatch) -> None:
+    """The compiled A* (large searches) against the textbook one on random grids, and against
+    the Python one on large grids with long walls, where a search floods thousands of
+    cells and the heap outgrows its first arrays: the same cells, in the same order."""
+    monkeypatch.setattr(planning, "_astar_compiled", True)
+    rng = np.random.default_rng(12)
+    for _ in range(150):
+        H, W = (int(v) for v in rng.integers(2, 60, 2))
+        grid = rng.random((H, W)) > rng.uniform(0.05, 0.4)
+        cells = np.argwhere(grid)
+        if len(cells) == 0:
+            continue
+        a, b = (tuple(int(v) for v in cells[i]) for i in rng.integers(len(cells), size=2))
+        ref, got = _reference_astar(grid, a, b), astar(grid, a, b)
+        assert (ref is None) == (got is None)
+        if ref is not None:
+            assert np.array_equal(ref, got) and got.dtype == np.int64
+    grid = rng.random((260, 300)) > 0.1
+    for c in range(20, 280, 40):  # walls with a gap at alternate ends
+        grid[(0 if c % 80 else 20) : (240 if c % 80 else 260), c : c + 3] = False
+    cells = np.argwhere(grid)
+    for _ in range(6):
+        a, b = (tuple(int(v) for v in cells[i]) for i in rng.integers(len(cells), size=2))
+        W = grid.shape[1] + 2
+        src, dst = (a[0] + 1) * W + a[1] + 1, (b[0] + 1) * W + b[1] + 1
+        python = planning._search(np.pad(grid, 1).tobytes(), W, src, dst)
+        compiled = planning._compiled_search(np.pad(grid, 1).reshape(-1), W, src, dst)
+        assert (python is None) == (compiled is None)
+        if python is not None:
+            assert np.array_equal(np.array(python), compiled)
+
+
+def test_a_search_over_the_budget_goes_on_compiled(monkeypatch) -> None:
+    """Past `ASTAR_PYTHON_BUDGET` expansions a search is run compiled, with the same path,
+    and so is every later one."""
+    monkeypatch.setattr(planning, "_astar_compiled", False)
+    monkeypatch.setattr(planning, "ASTAR_PYTHON_BUDGET", 50)
+    grid = np.ones((40, 40), bool)
+    grid[5:40, 20] = False
+    assert np.array_equal(astar(grid, (39, 0), (39, 39)),
+                          _reference_astar(grid, (39, 0), (39, 39)))
+    assert planning._astar_compiled
+    assert np.array_equal(astar(grid, (0, 0), (1, 1)), _reference_astar(grid, (0, 0), (1, 1)))

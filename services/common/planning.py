@@ -7,6 +7,7 @@ blocked cell (both side neighbours must be traversable), so paths stay executabl
 from __future__ import annotations
 
 import heapq
+import logging
 import math
 
 import numpy as np
@@ -14,6 +15,7 @@ from scipy import ndimage
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
+log = logging.getLogger(__name__)
 SQRT2 = math.sqrt(2.0)
 _MOVES = [(-1, 0, 1.0), (1, 0, 1.0), (0, -1, 1.0), (0, 1, 1.0),
           (-1, -1, SQRT2), (-1, 1, SQRT2), (1, -1, SQRT2), (1, 1, SQRT2)]
@@ -82,11 +84,46 @@ def _graph(traversable: np.ndarray) -> csr_matrix:
     return csr_matrix((costs, targets, indptr), shape=(H * W, H * W))
 
 
+# cells × starts from which the compiled search pays for numba's import and cache load (0.5-0.7
+# CPU-s, once per process): the warehouse's windows (200k cells, 9 starts a call), not the
+# rooms' (a house window is 50-100k cells with 3-6 starts, a few ms a start with scipy)
+COMPILED_MIN_WORK = 1_000_000
+
+
 def distance_fields(traversable: np.ndarray, starts_rc: list[tuple[int, int]]) -> np.ndarray:
     """(K, H, W) path lengths in cells from each start; inf where unreachable.
 
-    The graph is built once for all starts (building it costs more than the searches).
-    """
+    Large searches run compiled (`compiled_distance_fields`, about 3× faster on the
+    warehouse's grids: bench/bench_distance_fields.py), small ones on scipy's Dijkstra
+    (`scipy_distance_fields`); the two agree to the last bit."""
+    traversable = np.asarray(traversable, dtype=bool)
+    if traversable.size * len(starts_rc) >= COMPILED_MIN_WORK:
+        return compiled_distance_fields(traversable, starts_rc)
+    return scipy_distance_fields(traversable, starts_rc)
+
+
+def compiled_distance_fields(traversable: np.ndarray, starts_rc: list[tuple[int, int]],
+                             ) -> np.ndarray:
+    """`distance_fields` by a compiled bucket-queue Dijkstra (`grid_search`)."""
+    from services.common.grid_search import field_into  # numba: only where fields are large
+
+    traversable = np.asarray(traversable, dtype=bool)
+    H, W = traversable.shape
+    out = np.full((len(starts_rc), H, W), np.inf)
+    free = np.pad(traversable, 1).reshape(-1)  # a blocked border: no bounds checks
+    dist = np.empty((H + 2) * (W + 2))
+    for k, (r, c) in enumerate(starts_rc):
+        if 0 <= r < H and 0 <= c < W and traversable[r, c]:
+            dist.fill(np.inf)
+            field_into(free, W + 2, (int(r) + 1) * (W + 2) + int(c) + 1, dist)
+            out[k] = dist.reshape(H + 2, W + 2)[1:-1, 1:-1]
+    return out
+
+
+def scipy_distance_fields(traversable: np.ndarray, starts_rc: list[tuple[int, int]],
+                          ) -> np.ndarray:
+    """`distance_fields` by scipy's Dijkstra on the move graph (`_graph`; building it
+    costs more than the searches, so it is built once for all starts)."""
     traversable = np.asarray(traversable, dtype=bool)
     H, W = traversable.shape
     out = np.full((len(starts_rc), H, W), np.inf)
@@ -118,6 +155,15 @@ def distance_field(traversable: np.ndarray, start_rc: tuple[int, int]) -> np.nda
     return distance_fields(traversable, [start_rc])[0]
 
 
+# A* expansions past which a search is large (about 35 ms of Python; the warehouse's searches
+# around its racks take tens of thousands): it is run compiled instead
+# (`grid_search.astar_parents`, the same path, about 10× faster), and so is every later search
+# of the process. The rooms' searches nearly all stay under it, so an agent there seldom
+# imports numba (0.5-0.7 CPU-s per process, about its whole A* in a room mission).
+ASTAR_PYTHON_BUDGET = 10_000
+_astar_compiled = False
+
+
 def astar(
     traversable: np.ndarray, start_rc: tuple[int, int], goal_rc: tuple[int, int]
 ) -> np.ndarray | None:
@@ -126,6 +172,7 @@ def astar(
     Nodes are flat indices into the grid padded by one blocked cell, so a move needs no bounds
     check and reads one byte. A flat index orders like its (row, col), so heap ties break as
     they would on (row, col) tuples: the same path whatever the representation."""
+    global _astar_compiled
     grid = np.asarray(traversable, dtype=bool)
     H, W = grid.shape
     start, goal = (int(start_rc[0]), int(start_rc[1])), (int(goal_rc[0]), int(goal_rc[1]))
@@ -133,22 +180,40 @@ def astar(
         if not (0 <= r < H and 0 <= c < W) or not grid[r, c]:
             return None
     wp = W + 2
-    free = np.pad(grid, 1).tobytes()  # 1 = traversable, border 0
+    padded = np.pad(grid, 1)  # 1 = traversable, border 0
     src, dst = (start[0] + 1) * wp + start[1] + 1, (goal[0] + 1) * wp + goal[1] + 1
-    parent = _search(free, wp, src, dst)
+    parent = (None if _astar_compiled
+              else _search(padded.tobytes(), wp, src, dst, ASTAR_PYTHON_BUDGET))
+    if parent is _OVER_BUDGET:
+        log.info("an A* search past %d expansions: compiled from now on", ASTAR_PYTHON_BUDGET)
+        _astar_compiled = True
+    if _astar_compiled:
+        parent = _compiled_search(padded.reshape(-1), wp, src, dst)
     if parent is None:
         return None
     path = [dst]
     while parent[path[-1]] >= 0:
-        path.append(parent[path[-1]])
+        path.append(int(parent[path[-1]]))
     rc = np.divmod(np.array(path[::-1], dtype=np.int64), wp)
     return np.stack(rc, axis=1) - 1
 
 
-def _search(free: bytes, wp: int, src: int, dst: int) -> list[int] | None:
+def _compiled_search(free: np.ndarray, wp: int, src: int, dst: int) -> np.ndarray | None:
+    from services.common.grid_search import astar_parents  # numba: only for large searches
+
+    parent = np.full(free.size, -1, np.int64)
+    return parent if astar_parents(free, wp, src, dst, parent) else None
+
+
+_OVER_BUDGET: list[int] = []  # `_search`'s answer past `ASTAR_PYTHON_BUDGET` expansions
+
+
+def _search(free: bytes, wp: int, src: int, dst: int, budget: float = math.inf,
+            ) -> list[int] | None:
     """A* over flat indices of the padded grid; each node's parent (-1: none), or None when
-    unreachable. Costs, parents and the closed set are flat lists indexed by node: a search
-    that floods the grid (a goal behind a wall) runs about a fifth faster than with dicts."""
+    unreachable, or `_OVER_BUDGET` past `budget` expansions. Costs, parents and the closed
+    set are flat lists indexed by node: a search that floods the grid (a goal behind a wall)
+    runs about a fifth faster than with dicts."""
     # per move: flat offset, cost, the two side cells a diagonal must not cut (0: none), and
     # its (row, col) change, so the heuristic needs no divmod per neighbour
     table = [(dr * wp + dc, step, dr * wp if dr and dc else 0, dc if dr and dc else 0, dr, dc)
@@ -171,6 +236,9 @@ def _search(free: bytes, wp: int, src: int, dst: int) -> list[int] | None:
         if closed[node]:
             continue
         closed[node] = 1
+        budget -= 1
+        if budget < 0:
+            return _OVER_BUDGET
         r, c = divmod(node, wp)
         for off, step, side_r, side_c, dr, dc in table:
             nxt = node + off

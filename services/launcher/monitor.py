@@ -84,6 +84,9 @@ class Monitor:
         # tick k with the grid and frontiers of the same tick
         self.recent_grids: OrderedDict[int, m.OccupancyGrid] = OrderedDict()
         self.recent_frontiers: OrderedDict[int, int] = OrderedDict()
+        # edge ticks whose plan is fully out: the edge acknowledges a tick after its grid,
+        # frontiers, goals and corrections
+        self.recent_acks: OrderedDict[int, bool] = OrderedDict()
         self.alive: set[tuple[str, str]] = set()
         self.ever_alive: set[tuple[str, str]] = set()
         self.series: list[Snapshot] = []
@@ -95,6 +98,7 @@ class Monitor:
         bus.subscribe(keys.clock(), m.Clock)
         bus.subscribe(keys.map_grid(), m.OccupancyGrid)
         bus.subscribe(keys.map_frontiers(), m.Frontiers)
+        bus.subscribe(keys.edge_ack(), m.EdgeAck)
         # every robot's two poses per tick wait for the next clock to be handled
         bus.subscribe(keys.any_robot("pose"), m.RobotPose, wake=False)
         bus.subscribe(keys.any_robot("goal"), m.Goal)
@@ -207,6 +211,8 @@ class Monitor:
             _remember(self.recent_frontiers, msg.tick, len(msg.frontiers))
             if msg.complete and self.complete_tick is None:
                 self.complete_tick = msg.tick
+        elif isinstance(msg, m.EdgeAck):
+            _remember(self.recent_acks, msg.tick, True)
         elif isinstance(msg, m.GtPose) and msg.robot_id in self.tracks:
             t = self.tracks[msg.robot_id]
             t.gt_stamps_ns.append(msg.stamp_ns)

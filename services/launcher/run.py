@@ -282,14 +282,16 @@ def _wait_for_tracks(monitor: Monitor, end_stamp_ns: int, timeout_s: float = 3.0
 def _await_last_plan(monitor: Monitor, edge_every_ticks: int, timeout_s: float = 10.0) -> None:
     """At the sim-time cap the simulator publishes its last Clock and stops without waiting,
     but the edge still plans that tick when it is an edge tick. Read on until that plan's
-    frontiers arrive (the plan is then over and the planner lock free), so the final map
-    query cannot race the plan: a capped run's map is the last edge tick's whatever the load
-    (measured: a 120 s house run got tick 1190's map once in three)."""
+    acknowledgement arrives, which the edge sends after the plan's frontiers, goals and
+    corrections (the plan is then over and the planner lock free), so the final map query
+    cannot race the plan (measured: a 120 s house run got tick 1190's map once in three) and
+    the last plan's goals are in events.jsonl whatever the load (waiting for its frontiers
+    alone, a 20 s run's tick-200 goal was there in one run and not in its repeat)."""
     if monitor.clock is None:
         return
     last = monitor.clock.tick - monitor.clock.tick % edge_every_ticks
     deadline = time.monotonic() + timeout_s
-    while last not in monitor.recent_frontiers and time.monotonic() < deadline:
+    while last not in monitor.recent_acks and time.monotonic() < deadline:
         monitor.pump(timeout=0.05)
 
 
