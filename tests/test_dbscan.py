@@ -44,3 +44,22 @@ def test_empty_and_all_noise() -> None:
     assert dbscan_labels(np.zeros((0, 3)), 0.1, 3).shape == (0,)
     far = np.array([[0.0, 0, 0], [5.0, 0, 0], [10.0, 0, 0]])
     assert dbscan_labels(far, 0.1, 2).tolist() == [-1, -1, -1]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_lowest_connected_matches_scipy_components(seed: int) -> None:
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from services.common.dbscan import lowest_connected
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 400))
+    edges = rng.integers(0, n, (int(rng.integers(0, 2 * n)), 2))
+    chain = np.stack([np.arange(n - 1, 0, -1), np.arange(n - 2, -1, -1)], 1)[: n // 3]
+    edges = np.concatenate([edges, chain])  # a long path numbered backwards
+    root = lowest_connected(n, edges)
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    _, comp = connected_components(graph, directed=False)
+    lowest = {c: int(np.flatnonzero(comp == c).min()) for c in np.unique(comp)}
+    assert root.tolist() == [lowest[c] for c in comp]

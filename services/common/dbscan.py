@@ -13,13 +13,16 @@ viewers with it), more than all the clustering of a mission. This gives the labe
 
 Open3D's radius search keeps distances < eps and scipy's ≤ eps: they differ only for points
 exactly eps apart, which real-valued depth points are not.
+
+The components come from a union-find in numpy (roots hooked to the smaller root, then paths
+halved to the root) rather than scipy's sparse `connected_components`, whose matrix checks cost
+more than the search on the DRF's few hundred points (warehouse agent, 949 calls: 0.58 → 0.22
+CPU-s). Each component's root is its lowest point index, which is Open3D's numbering.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 
@@ -36,17 +39,32 @@ def dbscan_labels(points: np.ndarray, eps_m: float, min_points: int) -> np.ndarr
     if core_idx.size == 0:
         return labels
     both = core[pairs[:, 0]] & core[pairs[:, 1]]
-    edges = pairs[both]
-    graph = coo_matrix((np.ones(len(edges), np.int8), (edges[:, 0], edges[:, 1])), shape=(n, n))
-    n_comp, comp = connected_components(graph, directed=False)
-    first_core = np.full(n_comp, n, dtype=np.int64)
-    np.minimum.at(first_core, comp[core_idx], core_idx)
-    used = np.flatnonzero(first_core < n)  # components holding a core point
-    rank = np.full(n_comp, -1, dtype=np.int64)
-    rank[used[np.argsort(first_core[used])]] = np.arange(used.size)
-    labels[core_idx] = rank[comp[core_idx]]
+    root = lowest_connected(n, pairs[both])
+    _, rank = np.unique(root[core_idx], return_inverse=True)
+    labels[core_idx] = rank.reshape(-1)
     _label_borders(labels, core, pairs)
     return labels
+
+
+def lowest_connected(n: int, edges: np.ndarray) -> np.ndarray:
+    """(n,) int64: each node's lowest connected node index, for (E, 2) undirected edges."""
+    root = np.arange(n, dtype=np.int64)
+    if len(edges) == 0:
+        return root
+    a, b = edges[:, 0], edges[:, 1]
+    while True:
+        ra, rb = root[a], root[b]
+        apart = ra != rb
+        if not apart.any():
+            return root
+        ra, rb = ra[apart], rb[apart]
+        # hook each root to the smaller one; the lowest index of a component never moves
+        np.minimum.at(root, np.maximum(ra, rb), np.minimum(ra, rb))
+        while True:
+            up = root[root]
+            if np.array_equal(up, root):
+                break
+            root = up
 
 
 def _label_borders(labels: np.ndarray, core: np.ndarray, pairs: np.ndarray) -> None:
