@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from gtsam import Pose3
 
 from services.common.geometry import T_from_xyyaw, invert, transform_points
@@ -307,3 +308,26 @@ def test_a_robots_own_loop_pulls_its_way_back_only_when_asked() -> None:
         before = pose_change(store.submaps[key].T_reported, truth[key])[0]
         after = pose_change(merger.estimates[key], truth[key])[0]
         assert before > 0.1 and after < 0.6 * before, (key, before, after)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_chunked_precheck_answers_as_one_query_of_every_point(seed: int) -> None:
+    import small_gicp
+
+    from services.edge_server import merger as merger_mod
+
+    rng = np.random.default_rng(seed)
+    target = rng.uniform(0.0, 1.0, (3000, 3))
+    _, tree = small_gicp.preprocess_points(target, 0.02, num_threads=1)
+    answers = []
+    for _ in range(30):
+        points = rng.uniform(0.0, rng.uniform(1.0, 2.0), (int(rng.integers(0, 2000)), 3))
+        n_all = len(points) + int(rng.integers(1, 500))
+        near_m = float(rng.uniform(0.02, 0.1))
+        _, d2 = tree.batch_nearest_neighbor_search(points, num_threads=1)
+        near = int(np.count_nonzero(np.asarray(d2) < near_m**2))
+        frac = near / n_all * float(rng.uniform(0.8, 1.2))  # either side of the share
+        whole = near / n_all >= frac
+        assert merger_mod._share_near(tree, points, n_all, near_m, frac) == whole
+        answers.append(whole)
+    assert 0 < sum(answers) < len(answers)

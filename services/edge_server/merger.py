@@ -22,6 +22,7 @@ from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
+import small_gicp
 from gtsam import Pose3
 
 from services.common.arrays import column_extremes
@@ -116,6 +117,26 @@ def pose_change(T_a: np.ndarray, T_b: np.ndarray) -> tuple[float, float]:
     """(translation m, rotation rad) between two poses."""
     xi = Pose3.Logmap(Pose3(T_a).between(Pose3(T_b)))
     return float(np.linalg.norm(xi[3:])), float(np.linalg.norm(xi[:3]))
+
+
+PRECHECK_CHUNK = 512  # points per k-d tree query of the precheck
+
+
+def _share_near(tree: small_gicp.KdTree, points: np.ndarray, n_all: int, near_m: float,
+                frac: float) -> bool:
+    """Whether (points within `near_m` of the tree) / `n_all` ≥ `frac`, queried in chunks
+    and decided as soon as the rest cannot change the answer (the same answer as one query
+    of them all: the share only grows with the count)."""
+    near = 0
+    for start in range(0, len(points), PRECHECK_CHUNK):
+        if near / n_all >= frac:
+            return True
+        if (near + len(points) - start) / n_all < frac:
+            return False
+        chunk = points[start:start + PRECHECK_CHUNK]
+        _, d2 = tree.batch_nearest_neighbor_search(chunk, num_threads=1)
+        near += int(np.count_nonzero(np.asarray(d2) < near_m**2))
+    return near / n_all >= frac
 
 
 class MapMerger:
@@ -265,9 +286,8 @@ class MapMerger:
         inside = np.all((points >= lo - margin) & (points <= hi + margin), axis=1)
         if int(np.count_nonzero(inside)) / len(points) < self.params.precheck_frac:
             return False  # the same test as below, on a count at least as large
-        _, d2 = tgt.fine[1].batch_nearest_neighbor_search(points[inside], num_threads=1)
-        near = int(np.count_nonzero(np.asarray(d2) < self.params.precheck_m**2))
-        return near / len(points) >= self.params.precheck_frac
+        return _share_near(tgt.fine[1], points[inside], len(points), self.params.precheck_m,
+                           self.params.precheck_frac)
 
     def _fine_box(self, sm: StoredSubmap) -> np.ndarray:
         """(2, 3) box of the submap's fine registration points (its own frame)."""
