@@ -78,6 +78,39 @@ def sensor_model_ms(world: str, width: int, height: int) -> tuple[float, float]:
     return 1e3 * statistics.median(mask_s), 1e3 * statistics.median(model_s)
 
 
+def frame_stages_ms(world: str) -> dict[str, float]:
+    """Median ms per stage of one 160×120 GL frame (the camera's `_render_gl` split up, then
+    the depth model): which part of a frame a faster simulator would have to cut."""
+    import mujoco  # after services.simulator chose the GL backend
+
+    sim = Simulation(SimConfig(world=world, robots=3, render_backend="gl"))
+    sim.render(0)
+    cam, rng = sim.camera, np.random.default_rng(0)
+    stages: dict[str, list[float]] = {k: [] for k in (
+        "mjv_updateScene", "mjr_render", "mjr_readPixels", "flip + depth", "depth model")}
+    for k in range(60):
+        sim.step({0: (0.2, 0.3)})
+        cam._gl.make_current()
+        cam._cam.fixedcamid = sim.robots[k % 3].camera
+        t = [time.perf_counter()]
+        mujoco.mjv_updateScene(cam.model, sim.data, cam._opt, None, cam._cam,
+                               mujoco.mjtCatBit.mjCAT_ALL.value, cam._scene)
+        t.append(time.perf_counter())
+        mujoco.mjr_render(cam._rect, cam._scene, cam._ctx)
+        t.append(time.perf_counter())
+        mujoco.mjr_readPixels(cam._rgb, cam._zbuf, cam._rect, cam._ctx)  # waits for the GL
+        t.append(time.perf_counter())
+        np.flipud(cam._rgb).copy()
+        depth = cam._d / (np.flipud(cam._zbuf) + cam._c)
+        t.append(time.perf_counter())
+        apply_depth_model(depth, cam.K, cam.sensors, cam.range_m, rng)
+        t.append(time.perf_counter())
+        for name, a, b in zip(stages, t[:-1], t[1:], strict=True):
+            stages[name].append(b - a)
+    sim.close()
+    return {name: 1e3 * statistics.median(v) for name, v in stages.items()}
+
+
 def realtime_factor(world: str, robots: int, ticks: int) -> tuple[float, float, float]:
     """(real-time factor, ms per tick rendering, ms per tick stepping) at the default rates."""
     cfg = SimConfig(world=world, robots=robots)
@@ -116,11 +149,19 @@ def main() -> None:
     parser.add_argument("--skip-gt", action="store_true", help="no ground-truth build times")
     parser.add_argument("--sensor-model-only", action="store_true",
                         help="only the depth model's cost per frame")
+    parser.add_argument("--frame-stages", action="store_true",
+                        help="only a 160×120 GL frame's stages (scene, render, read, depth)")
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
     named = worlds()
     frame_worlds = [w for w in ("house", "AWS house") if w in named]
     lines = ["| measure | world | value |", "|---|---|---|"]
+    if args.frame_stages:
+        for label in frame_worlds:
+            for name, ms in frame_stages_ms(named[label]).items():
+                lines.append(f"| 160×120 frame: {name} | {label} | {ms:.2f} ms |")
+        print("\n".join(lines))
+        return
     for label in frame_worlds:
         for w, h in ((160, 120), (320, 240)):
             mask_ms, model_ms = sensor_model_ms(named[label], w, h)
