@@ -134,26 +134,25 @@ def robot_cluster(
         _, first, inverse, _ = unique_groups(keys)
     reps = points_base[first]
     labels = dbscan_labels(reps, params.eps_m, params.min_points)
-    inside = labels >= 0
+    clustered = labels >= 0
     robot = np.zeros(labels.shape, bool)
-    robot[inside] = _robot_labels(reps[inside, :2], labels[inside], centre_xy, params)[
-        labels[inside]]
+    keep = _robot_sized(reps[clustered, :2], labels[clustered], centre_xy, params)
+    robot[clustered] = keep[labels[clustered]]
     return robot[inverse.reshape(-1)]
 
 
-def _robot_labels(
+def _robot_sized(
     xy: np.ndarray, labels: np.ndarray, centre_xy: np.ndarray, params: DrfParams
 ) -> np.ndarray:
     """(max label + 1,) bool per cluster (labels ≥ 0): near the expected position and of the
     robot's size. Per-cluster minima and maxima, so the same floats as a loop over clusters."""
     n_labels = int(labels.max()) + 1 if labels.size else 0
-    lab = labels
     gap = np.full(n_labels, np.inf)
-    np.minimum.at(gap, lab, np.hypot(*(xy - centre_xy[None, :]).T))
+    np.minimum.at(gap, labels, np.hypot(*(xy - centre_xy[None, :]).T))
     lo = np.full((n_labels, 2), np.inf)
     hi = np.full((n_labels, 2), -np.inf)
-    np.minimum.at(lo, lab, xy)
-    np.maximum.at(hi, lab, xy)
+    np.minimum.at(lo, labels, xy)
+    np.maximum.at(hi, labels, xy)
     diag = np.hypot(*(hi - lo).T)
     fits = diag <= 2 * params.radius_m + 2 * params.voxel_m
     return (gap <= params.radius_m + params.c) & fits
