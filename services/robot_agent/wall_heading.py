@@ -23,6 +23,7 @@ Pure: numpy in, numpy out.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -143,15 +144,15 @@ def _segments_direction(xy: np.ndarray, theta: np.ndarray, direction: float,
         across = -s * xy[member, 0] + c * xy[member, 1]
         order = np.argsort(across)
         along, across = along[order], across[order]
-        cuts = np.flatnonzero(np.diff(across) > params.gap_m) + 1
-        for u, v in _contiguous(np.split(along, cuts), np.split(across, cuts),
-                                params.along_gap_m):
-            if len(u) < params.segment_min_points or np.ptp(u) < params.segment_min_length_m:
+        for u, v in _contiguous(_long_groups(along, across, params), params.along_gap_m):
+            n = len(u)  # sums as u.mean() and np.mean take them, without their overhead
+            if n < params.segment_min_points or u.max() - u.min() < params.segment_min_length_m:
                 continue
-            du, dv = u - u.mean(), v - v.mean()
+            du, dv = u - np.add.reduce(u) / n, v - np.add.reduce(v) / n
             suu = float(du @ du)
             slope = float(du @ dv) / suu
-            rms = float(np.sqrt(np.mean((dv - slope * du) ** 2)))
+            r = dv - slope * du
+            rms = math.sqrt(float(np.add.reduce(r * r)) / n)
             if rms > params.segment_max_rms_m:
                 continue
             slopes.append(slope)
@@ -164,14 +165,34 @@ def _segments_direction(xy: np.ndarray, theta: np.ndarray, direction: float,
     return direction + float(slope_arr[order][np.searchsorted(cum, 0.5 * cum[-1])])
 
 
-def _contiguous(alongs: list[np.ndarray], acrosses: list[np.ndarray], max_gap_m: float,
+def _long_groups(along: np.ndarray, across: np.ndarray, params: WallHeadingParams,
+                 ) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """(along, across, extent along) of the runs, in order across the line, between jumps of
+    over `gap_m`, keeping only those with enough points and length to hold a segment (a split
+    along the line only shortens a run): the rest never reach a fit, and most are a few points."""
+    bounds = np.concatenate(([0], np.flatnonzero(np.diff(across) > params.gap_m) + 1,
+                             [len(across)]))
+    lo, hi = bounds[:-1], bounds[1:]
+    big = np.flatnonzero(hi - lo >= params.segment_min_points)
+    if not len(big):
+        return []
+    extent = np.maximum.reduceat(along, lo)[big] - np.minimum.reduceat(along, lo)[big]
+    return [(along[lo[i]:hi[i]], across[lo[i]:hi[i]], float(e))
+            for i, e in zip(big, extent, strict=True) if e >= params.segment_min_length_m]
+
+
+def _contiguous(groups: list[tuple[np.ndarray, np.ndarray, float]], max_gap_m: float,
                 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Each (along, across) group split where its points, in order along the line, leave a
-    gap over `max_gap_m` (≤ 0: the groups as they are)."""
+    gap over `max_gap_m` (≤ 0: the groups as they are). A group no longer than that has no
+    such gap and is not sorted."""
     if max_gap_m <= 0:
-        return list(zip(alongs, acrosses, strict=True))
+        return [(u, v) for u, v, _ in groups]
     out = []
-    for u, v in zip(alongs, acrosses, strict=True):
+    for u, v, extent in groups:
+        if extent <= max_gap_m:
+            out.append((u, v))
+            continue
         order = np.argsort(u, kind="stable")
         cuts = np.flatnonzero(np.diff(u[order]) > max_gap_m) + 1
         if len(cuts) == 0:  # as it came: the fit's sums in the same order, to the last bit
