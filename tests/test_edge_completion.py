@@ -11,9 +11,10 @@ from services.common.grid import GridSpec
 from services.common.planning import distance_fields
 from services.edge_server.completion import CompletionJudge, VisitLog
 from services.edge_server.config import EdgeConfig
-from services.edge_server.frontiers import frontier_set
+from services.edge_server.frontiers import FrontierSet, frontier_set
 from services.edge_server.goals import GoalBook
-from services.edge_server.planner import robot_fields
+from services.edge_server.planner import EdgePlanner, robot_fields
+from tests.test_edge_map import make_submap, voxel_centres
 
 
 def test_visit_log_needs_range_and_field_of_view() -> None:
@@ -146,3 +147,42 @@ def test_a_robot_on_a_small_island_plans_from_the_mainland_next_to_it() -> None:
     assert np.isfinite(moved[0][0, 39])
     beyond = RobotFields(trav, start, 3.0, island_cells=100)  # the mainland out of reach
     assert beyond.starts[0] == (20, 5) and not beyond.reaches(0, far_side).any()
+
+
+def tail_planner(config: EdgeConfig, voxels: int) -> EdgePlanner:
+    """A planner whose merged map holds `voxels` voxels."""
+    planner = EdgePlanner(config, tick_s=0.1)
+    idx = [[i, j, 1] for i in range(voxels // 10) for j in range(10)]
+    planner.on_submap(make_submap(0, 0, 0, 1, np.eye(4), voxel_centres(idx)))
+    planner.merged.update(planner.store)
+    assert len(planner.merged) == voxels
+    return planner
+
+
+def side_by_side(sizes: list[int], weak: list[bool]) -> FrontierSet:
+    """Regions side by side on a 10 × 10 grid, each goal at its own reachable cell."""
+    n = len(sizes)
+    rc = np.array([[5, 2 * i + 1] for i in range(n)])
+    return FrontierSet(labels=np.zeros((10, 10), np.int32), sizes=np.array(sizes),
+                       centroid_xy=rc[:, ::-1] * 0.05, anchor_rc=rc, anchor_xy=rc * 0.05,
+                       goal_rc=rc, goal_xy=rc[:, ::-1] * 0.05, weak=np.array(weak))
+
+
+def test_the_tail_drops_specks_once_the_regions_are_few() -> None:
+    reachable = np.ones((10, 10), bool)
+    fs = side_by_side([200, 12, 12], [False, False, True])  # a region, a speck, a weak speck
+    base = dict(planner="space", space_tail_min_voxels=20)
+    # 212 assignable F_u voxels against 1000 in the map: the tail at 0.3, not at 0.2
+    kept = tail_planner(EdgeConfig(**base, space_tail_fraction=0.3), 1000)._without_tail_specks(
+        fs, reachable, 10)
+    assert kept.sizes.tolist() == [200, 12] and kept.weak.tolist() == [False, True]
+    early = tail_planner(EdgeConfig(**base, space_tail_fraction=0.2), 1000)
+    assert len(early._without_tail_specks(fs, reachable, 10)) == 3
+    off = tail_planner(EdgeConfig(planner="space", space_tail_fraction=0.3), 1000)
+    assert len(off._without_tail_specks(fs, reachable, 10)) == 3
+    # a region no robot reaches does not count towards the tail's share
+    far = reachable.copy()
+    far[5, 1] = False
+    kept = tail_planner(EdgeConfig(**base, space_tail_fraction=0.02), 1000)._without_tail_specks(
+        fs, far, 10)
+    assert kept.sizes.tolist() == [200, 12]

@@ -280,5 +280,11 @@ class EdgeConfig(BaseModel):
         "F_u regions hold at most this fraction of the merged map's voxels for "
         "complete_unexplored_plans plans in a row (the tail: specks that add little "
         "coverage; docs/edge.md, 'The tail'); 0 = only when no frontier is assignable")
+    space_tail_fraction: float = Field(
+        default=0.002, ge=0, lt=1, description="`space` with space_tail_min_voxels: the tail "
+        "begins when the assignable F_u regions hold at most this fraction of the merged map")
+    space_tail_min_voxels: int = Field(
+        default=0, ge=0, description="`space`: in the tail, F_u regions smaller than this are "
+        "no goal (0 = off; docs/edge.md, \"Specks in the tail\")")
     complete_unexplored_plans: int = Field(
         default=6, ge=1, description="consecutive plans under complete_unexplored_fraction")

@@ -205,6 +205,7 @@ class EdgePlanner:
                                              self._point_frontiers(), goal_edt, snap.free)
             # F_w regions already seen from close by are not worth a trip (completion.py)
             fs = subset(fs, ~(fs.weak & self.visits.seen(fs.centroid_xy)))
+            fs = self._without_tail_specks(fs, reachable, tick)
             fs = self._with_unseen_floor(fs, snap, reachable, goal_edt, tick)
             imp = importance(tick * self.tick_s, robot_xy, fs.centroid_xy, fs.weak,
                              cfg.importance_lambda, cfg.importance_xi_s)
@@ -231,6 +232,28 @@ class EdgePlanner:
             return frontier_set(mask, reachable, spec, 1, cfg.goal_max_offset_m, goal_edt)
         return detect_frontiers(snap.free, snap.known, reachable, spec, cfg, goal_edt)
 
+    def _unexplored_voxels(self, fs: FrontierSet, reachable: np.ndarray, tick: int) -> int:
+        """The assignable F_u regions' voxels, together."""
+        if not len(fs):
+            return 0
+        assert fs.weak is not None
+        goal_rc = fs.goal_rc
+        usable = (self.book.allowed(fs, tick) & reachable[goal_rc[:, 0], goal_rc[:, 1]]
+                  & ~fs.weak)
+        return int(fs.sizes[usable].sum())
+
+    def _without_tail_specks(self, fs: FrontierSet, reachable: np.ndarray,
+                             tick: int) -> FrontierSet:
+        """`space` with `space_tail_min_voxels`: once the assignable F_u regions hold at most
+        `space_tail_fraction` of the merged map, those under that many voxels are no goal:
+        late in a mission a robot crossed the house for a speck worth a tenth of a percent."""
+        cfg = self.config
+        if (cfg.planner != "space" or cfg.space_tail_min_voxels <= 0 or not len(fs)
+                or self._unexplored_voxels(fs, reachable, tick)
+                > cfg.space_tail_fraction * len(self.merged)):
+            return fs
+        return subset(fs, fs.weak | (fs.sizes >= cfg.space_tail_min_voxels))
+
     def _with_unseen_floor(self, fs: FrontierSet, snap: GridSnapshot, reachable: np.ndarray,
                            goal_edt: GoalTransform, tick: int) -> FrontierSet:
         """`space` with `floor_unseen_min_m2`: the unseen floor patches join the regions
@@ -241,13 +264,8 @@ class EdgePlanner:
         cfg = self.config
         if cfg.planner != "space" or cfg.floor_unseen_min_m2 <= 0:
             return fs
-        endgame = True
-        if len(fs):
-            assert fs.weak is not None
-            goal_rc = fs.goal_rc
-            usable = (self.book.allowed(fs, tick) & reachable[goal_rc[:, 0], goal_rc[:, 1]]
-                      & ~fs.weak)
-            endgame = fs.sizes[usable].sum() <= cfg.complete_unexplored_fraction * len(self.merged)
+        endgame = (self._unexplored_voxels(fs, reachable, tick)
+                   <= cfg.complete_unexplored_fraction * len(self.merged))
         if cfg.floor_unseen_when == "endgame" and not endgame:
             return fs
         extra = unseen_floor_regions(self.merged.keys, self.merged.voxel_m, snap.free,
