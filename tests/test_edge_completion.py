@@ -178,7 +178,8 @@ def test_the_tail_drops_specks_once_the_regions_are_few() -> None:
     assert kept.sizes.tolist() == [200, 12] and kept.weak.tolist() == [False, True]
     early = tail_planner(EdgeConfig(**base, space_tail_fraction=0.2), 1000)
     assert len(early._without_tail_specks(fs, reachable, 10)) == 3
-    off = tail_planner(EdgeConfig(planner="space", space_tail_fraction=0.3), 1000)
+    off = tail_planner(EdgeConfig(planner="space", space_tail_fraction=0.3,
+                                  space_tail_min_voxels=0), 1000)
     assert len(off._without_tail_specks(fs, reachable, 10)) == 3
     # a region no robot reaches does not count towards the tail's share
     far = reachable.copy()

@@ -284,7 +284,7 @@ class EdgeConfig(BaseModel):
         default=0.002, ge=0, lt=1, description="`space` with space_tail_min_voxels: the tail "
         "begins when the assignable F_u regions hold at most this fraction of the merged map")
     space_tail_min_voxels: int = Field(
-        default=0, ge=0, description="`space`: in the tail, F_u regions smaller than this are "
+        default=50, ge=0, description="`space`: in the tail, F_u regions smaller than this are "
         "no goal (0 = off; docs/edge.md, \"Specks in the tail\")")
     complete_unexplored_plans: int = Field(
         default=6, ge=1, description="consecutive plans under complete_unexplored_fraction")
