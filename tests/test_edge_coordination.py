@@ -178,3 +178,20 @@ def test_a_large_region_outbids_a_speck_nearer_only_when_sizes_count() -> None:
     assert int(np.argmax(sized[0])) == 1
     # the weight is relative to the smallest region the detector keeps: a minimal one × 1
     np.testing.assert_allclose(sized[0, 0], plain[0, 0])
+
+
+def test_a_lower_time_exponent_lets_a_far_cluster_outbid_a_near_speck() -> None:
+    """One region 1 m ahead against three within view of a goal 6 m ahead: per second of
+    travel the near one wins; with the time counted at power 0.5 the far cluster does."""
+    robot = RobotStates(np.zeros((1, 2)), np.zeros(1), np.zeros((0, 2)))
+    fs = regions([(1.0, 0.0), (6.0, 0.0), (6.0, 0.5), (6.0, -0.5)], [1.0] * 4)
+    fs = replace(fs, goal_xy=np.array([[1.0, 0.0], [6.0, 0.0], [6.0, 0.0], [6.0, 0.0]]))
+    path = np.array([[1.0, 6.0, 6.0, 6.0]])
+    per_second = make_scorer("space", EdgeConfig()).score(path, fs, robot)
+    assert int(np.argmax(per_second[0])) == 0
+    damped = make_scorer("space", EdgeConfig(space_time_exponent=0.5)).score(path, fs, robot)
+    assert int(np.argmax(damped[0])) in (1, 2, 3)
+    # exponent 1 is the plain ratio, to the bit
+    np.testing.assert_array_equal(
+        make_scorer("space", EdgeConfig(space_time_exponent=1.0)).score(path, fs, robot),
+        per_second)

@@ -234,3 +234,22 @@ def test_grid_fallback_ignores_frontiers_shorter_than_its_minimum() -> None:
                             np.stack([cols.ravel(), rows.ravel()], axis=1)))
     p.on_pose(pose(0, 0.5))
     assert not p.plan(10).goals  # the 176-cell rim is under 200
+
+
+def test_grid_goals_join_the_regions_worth_the_unknown_floor_they_see() -> None:
+    """With `space_grid_goals_min_cells` the grid's long frontier is a goal even with the
+    fallback off, worth the unknown floor in sight of it; below the minimum it is not."""
+    def planner_for(min_cells: int) -> EdgePlanner:
+        p = EdgePlanner(EdgeConfig(planner="space", space_grid_fallback=False,
+                                   floor_unseen_min_m2=0.0, space_grid_goals_min_cells=min_cells,
+                                   space_view_gain_per_m2=0.05), tick_s=0.1)
+        cols, rows = np.meshgrid(np.arange(0, 80), np.arange(20, 30))
+        free = np.stack([cols.ravel(), rows.ravel()], axis=1)
+        p.on_submap(make_submap(0, 0, 0, 1, np.eye(4), np.zeros((0, 3)), free))
+        p.on_pose(pose(0, 0.5))
+        return p
+
+    out = planner_for(40).plan(10)
+    assert [(g.robot_id, g.frontier_class) for g in out.goals] == [(0, "unexplored")]
+    assert [f.size for f in out.frontiers.frontiers] == [176]
+    assert not planner_for(200).plan(10).goals

@@ -106,7 +106,8 @@ class SpaceScorer:
             grid_view_m=c.space_grid_view_m,
             teammate_radius_m=c.space_teammate_radius_m or c.space_view_radius_m,
             size_exponent=c.space_size_exponent, size_ref=float(c.unexplored_min_voxels),
-            partition_discount=c.space_partition_discount)
+            partition_discount=c.space_partition_discount, time_exponent=c.space_time_exponent,
+            view_gain_per_m2=c.space_view_gain_per_m2, view_range_m=c.space_view_range_m)
 
     def match(self, scores: np.ndarray) -> dict[int, int]:
         return joint_match(scores) if self.config.space_joint else greedy_match(scores)

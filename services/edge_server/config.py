@@ -106,6 +106,23 @@ class EdgeConfig(BaseModel):
         default=0.0, ge=0, description="`space`: a goal is also worth this per metre of 2D "
         "grid frontier within space_grid_view_m of it (the unknown floor it looks into), so "
         "the team spreads out before it cleans up; 0: 3D regions only")
+    space_time_exponent: float = Field(
+        default=1.0, gt=0, le=2, description="`space`: a goal's view information is divided "
+        "by its travel time to this power; under 1 a farther goal that sees more gains on a "
+        "near one that sees little (1: information per second)")
+    space_view_gain_per_m2: float = Field(
+        default=0.0, ge=0, description="`space`: a goal is also worth this per m² of unknown "
+        "floor in line of sight within space_view_range_m of it on the merged grid "
+        "(visible_unknown.py: a door to an unmapped room outbids a speck); 0: off")
+    space_view_range_m: float = Field(default=3.0, gt=0, description="reach of that view, m")
+    space_view_min_frontier_cells: int = Field(
+        default=40, ge=1, description="unknown floor counts in that view only where it borders "
+        "a grid frontier cluster of this many cells (an unmapped room, not a cabinet's inside)")
+    space_grid_goals_min_cells: int = Field(
+        default=0, ge=0, description="`space`: 2D grid frontier clusters of at least this many "
+        "cells are goals too, worth the unknown floor in sight of them (with "
+        "space_view_gain_per_m2) and the regions near them; 0: 3D regions only (the grid "
+        "only as the fallback)")
     space_grid_view_m: float = Field(
         default=2.5, gt=0, description="half-side of the square around f′ whose grid frontier "
         "counts, m")

@@ -118,6 +118,7 @@ def coordinated_revenue(
     omega_radps: float, view_radius_m: float, teammate_discount: float, min_time_s: float,
     grid_gain_per_m: float = 0.0, grid_view_m: float = 0.0, teammate_radius_m: float | None = None,
     size_exponent: float = 0.0, size_ref: float = 1.0, partition_discount: float = 1.0,
+    time_exponent: float = 1.0, view_gain_per_m2: float = 0.0, view_range_m: float = 0.0,
 ) -> np.ndarray:
     """(R, F) view information (teammates' discounted) per second of travel; −inf unreachable.
     With `grid_gain_per_m`, a goal is also worth that much per metre of 2D grid frontier
@@ -125,7 +126,9 @@ def coordinated_revenue(
     `teammate_radius_m` (default `view_radius_m`): how near a teammate's goal discounts.
     `size_exponent` > 0: each region's information × (its size / `size_ref`)^that.
     `partition_discount` < 1: a goal nearer a teammate than the robot counts that much
-    (`partition_factor`)."""
+    (`partition_factor`). `view_gain_per_m2`: per m² of unknown floor in sight of f′
+    (`frontiers.unknown_view_m2`), discounted near a teammate's goal. `time_exponent` < 1:
+    the travel time counts less than in full."""
     if teammate_radius_m is None:
         teammate_radius_m = view_radius_m
     n = len(frontiers)
@@ -139,10 +142,13 @@ def coordinated_revenue(
     if grid_gain_per_m > 0 and frontiers.grid_frontier_m is not None:
         view = view + grid_gain_per_m * frontiers.grid_frontier_m * teammate_factor(
             frontiers.goal_xy, robots.held_goals_xy, grid_view_m, teammate_discount)
+    if view_gain_per_m2 > 0 and frontiers.unknown_view_m2 is not None:
+        view = view + view_gain_per_m2 * frontiers.unknown_view_m2 * teammate_factor(
+            frontiers.goal_xy, robots.held_goals_xy, view_range_m, teammate_discount)
     t = travel_time_s(path_m, robots.xy_world, robots.yaw_world, frontiers.goal_xy, v_mps,
                       omega_radps)
     part = partition_factor(frontiers.goal_xy, robots.xy_world, robots.held_goals_xy,
                             partition_discount)
     with np.errstate(divide="ignore", invalid="ignore"):
-        u = view[None, :] * part / np.maximum(t, min_time_s)
+        u = view[None, :] * part / np.maximum(t, min_time_s) ** time_exponent
     return np.where(np.isfinite(path_m), u, -np.inf)

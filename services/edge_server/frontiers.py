@@ -42,6 +42,7 @@ class FrontierSet:
     importance: np.ndarray | None = None  # (F,) I_t(f); None = 1
     centroid_z: np.ndarray | None = None  # (F,) mean height of V_f (3D frontiers)
     grid_frontier_m: np.ndarray | None = None  # (F,) m of 2D grid frontier near f′ (space)
+    unknown_view_m2: np.ndarray | None = None  # (F,) m² of unknown floor in sight of f′ (space)
     view: np.ndarray | None = None  # (F,) bool: f′ is a far view; the robot faces the region
 
     def __len__(self) -> int:

@@ -57,6 +57,7 @@ from services.edge_server.spatial_frontiers import (
 )
 from services.edge_server.submap_store import SubmapStore
 from services.edge_server.unseen_floor import FULL_ENTROPY, unseen_floor_regions
+from services.edge_server.visible_unknown import live_unknown, visible_unknown_m2
 
 if TYPE_CHECKING:
     from services.edge_server.merger import MapMerger
@@ -207,12 +208,18 @@ class EdgePlanner:
             fs = subset(fs, ~(fs.weak & self.visits.seen(fs.centroid_xy)))
             fs = self._without_tail_specks(fs, reachable, tick)
             fs = self._with_unseen_floor(fs, snap, reachable, goal_edt, tick)
+            fs = self._with_grid_goals(fs, snap, reachable, goal_edt)
             imp = importance(tick * self.tick_s, robot_xy, fs.centroid_xy, fs.weak,
                              cfg.importance_lambda, cfg.importance_xi_s)
             border = (frontier_length_near(snap.free, snap.known, fs.goal_rc, spec,
                                            cfg.space_grid_view_m, cfg.frontier_min_cells)
                       if cfg.space_grid_gain_per_m > 0 else None)
-            return replace(fs, importance=imp, grid_frontier_m=border)
+            seen = (visible_unknown_m2(snap.occupied,
+                                       live_unknown(snap.free, snap.known,
+                                                    cfg.space_view_min_frontier_cells),
+                                       fs.goal_rc, spec, cfg.space_view_range_m)
+                    if cfg.space_view_gain_per_m2 > 0 else None)
+            return replace(fs, importance=imp, grid_frontier_m=border, unknown_view_m2=seen)
         if cfg.planner == "rrt":
             starts = [fields.starts[r] for r in sorted(fields.starts)]
             rng = np.random.default_rng([cfg.seed, tick])
@@ -283,6 +290,23 @@ class EdgePlanner:
                      tick * self.tick_s, len(extra), floor_m2)
             self._floor_regions = len(extra)
         return concat(fs, extra) if len(extra) else fs
+
+    def _with_grid_goals(self, fs: FrontierSet, snap: GridSnapshot, reachable: np.ndarray,
+                         goal_edt: GoalTransform) -> FrontierSet:
+        """`space` with `space_grid_goals_min_cells`: the grid's frontier clusters of that many
+        cells join the 3D regions as goals worth no information of their own: what they are
+        worth is the unknown floor in sight of them (`space_view_gain_per_m2`) and the regions
+        near them. Their cells count toward the tail's share, as the endgame's do."""
+        cfg = self.config
+        if cfg.planner != "space" or cfg.space_grid_goals_min_cells <= 0:
+            return fs
+        grid = detect_frontiers(snap.free, snap.known, reachable, snap.spec,
+                                cfg.model_copy(update={
+                                    "frontier_min_cells": cfg.space_grid_goals_min_cells}),
+                                goal_edt)
+        if not len(grid):
+            return fs
+        return concat(fs, replace(grid_as_unexplored(grid), gain=np.zeros(len(grid))))
 
     def _fall_back_to_grid(self, fs: FrontierSet, fields: RobotFields, tick: int) -> bool:
         """SPACE planners with `space_grid_fallback`: no 3D region is usable this plan."""

@@ -43,7 +43,8 @@ def subset(fs: FrontierSet, keep: np.ndarray) -> FrontierSet:
     renumber[1:][keep] = np.arange(1, int(keep.sum()) + 1, dtype=np.int32)
     pick = {name: (getattr(fs, name)[keep] if getattr(fs, name) is not None else None)
             for name in ("sizes", "centroid_xy", "anchor_rc", "anchor_xy", "goal_rc", "goal_xy",
-                         "weak", "gain", "importance", "centroid_z", "grid_frontier_m", "view")}
+                         "weak", "gain", "importance", "centroid_z", "grid_frontier_m",
+                         "unknown_view_m2", "view")}
     return FrontierSet(labels=renumber[fs.labels], dropped_unreachable=fs.dropped_unreachable,
                        **pick)
 
