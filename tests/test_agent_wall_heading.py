@@ -217,6 +217,28 @@ def test_a_robot_that_agrees_with_the_team_keeps_its_own_direction() -> None:
     assert walls.world_rad == own
 
 
+def test_a_jump_of_the_edge_correction_does_not_move_the_team_direction() -> None:
+    """AWS house, seed 4 (view gain): the edge's correction of robot 1 rotated by a wrong
+    +0.73°; converted with it, both teammates' directions sat 0.57° from robot 1's own, the
+    team outvoted it and the agent turned its heading to the edge's error. A teammate's
+    direction is kept as it first arrived, so the robot keeps its own."""
+    rng = np.random.default_rng(6)
+    room = _rotated(_room(rng), 0.1)
+    walls = WallHeading(PARAMS)
+    start = np.zeros(3)
+    for _ in range(PARAMS.learn_frames):
+        walls.update(start, np.zeros((3, 3)), *_frame(room, (0.0, 0.0, 0.0)))
+    own = walls.own_rad
+    assert own is not None
+    for rid in (1, 2):
+        walls.receive(rid, own + math.radians(0.1), 0.0)
+    for rid in (1, 2):  # the same directions, this robot's correction now +0.73° off
+        walls.receive(rid, own + math.radians(0.1), math.radians(0.73))
+    assert all(abs(math.degrees(v - own) - 0.1) < 1e-9 for v in walls.team.values())
+    walls.update(start, np.diag([1e-6, 1e-6, 1e-6]), *_frame(room, (0.0, 0.0, 0.0)))
+    assert walls.world_rad == own
+
+
 def test_walls_that_disagree_alike_frame_after_frame_take_a_confident_wrong_heading_back(
 ) -> None:
     """Warehouse, seed 0: a robot turned into new ground with 1-7° of yaw error, registered

@@ -273,8 +273,12 @@ class WallHeading:
 
     def receive(self, robot_id: int, direction_world_rad: float | None,
                 yaw_world_loc: float) -> None:
-        """A teammate's learned direction (world frame), kept in this robot's frame."""
-        if direction_world_rad is not None:
+        """A teammate's learned direction (world frame), kept in this robot's frame as it
+        first arrives. A learned direction never changes, so a later change of the pair is
+        a change of the edge's corrections (`yaw_world_loc`, the sender's or this robot's),
+        not of the walls: following it turned a wrong +0.73° correction into this robot's
+        own heading (AWS house, view gain, seed 4: a ghost)."""
+        if direction_world_rad is not None and robot_id not in self.team:
             self.team[robot_id] = float(fold(direction_world_rad - yaw_world_loc))
 
     def shared(self, yaw_world_loc: float) -> float | None:
