@@ -79,7 +79,7 @@ def test_space_with_the_view_gain_goes_to_the_door() -> None:
                      unknown_view_m2=np.array([0.0, 6.0]))
     path = np.array([[2.0, 2.0]])
     robot = RobotStates(np.zeros((1, 2)), np.array([math.pi / 2]), np.zeros((0, 2)))
-    plain = make_scorer("space", EdgeConfig()).score(path, fs, robot)
+    plain = make_scorer("space", EdgeConfig(space_view_gain_per_m2=0.0)).score(path, fs, robot)
     assert plain[0, 0] == plain[0, 1]
     scorer = make_scorer("space", EdgeConfig(space_view_gain_per_m2=0.1))
     assert int(np.argmax(scorer.score(path, fs, robot)[0])) == 1

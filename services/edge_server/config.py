@@ -111,7 +111,7 @@ class EdgeConfig(BaseModel):
         "by its travel time to this power; under 1 a farther goal that sees more gains on a "
         "near one that sees little (1: information per second)")
     space_view_gain_per_m2: float = Field(
-        default=0.0, ge=0, description="`space`: a goal is also worth this per m² of unknown "
+        default=0.05, ge=0, description="`space`: a goal is also worth this per m² of unknown "
         "floor in line of sight within space_view_range_m of it on the merged grid "
         "(visible_unknown.py: a door to an unmapped room outbids a speck); 0: off")
     space_view_range_m: float = Field(default=3.0, gt=0, description="reach of that view, m")

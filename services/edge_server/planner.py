@@ -218,7 +218,7 @@ class EdgePlanner:
                                        live_unknown(snap.free, snap.known,
                                                     cfg.space_view_min_frontier_cells),
                                        fs.goal_rc, spec, cfg.space_view_range_m)
-                    if cfg.space_view_gain_per_m2 > 0 else None)
+                    if cfg.space_view_gain_per_m2 > 0 and cfg.planner == "space" else None)
             return replace(fs, importance=imp, grid_frontier_m=border, unknown_view_m2=seen)
         if cfg.planner == "rrt":
             starts = [fields.starts[r] for r in sorted(fields.starts)]
