@@ -5,15 +5,26 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")  # headless: no display on the evaluation machine
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+if TYPE_CHECKING:
+    from matplotlib import pyplot
 
 MAX_MAP_POINTS = 60_000  # subsample for a readable, fast scatter
+
+
+def _pyplot() -> pyplot:
+    """matplotlib's pyplot on the Agg backend (headless: no display on the evaluation
+    machine), imported when a figure is drawn: it costs about 1 CPU-s, and the launcher
+    imports this module for its labels at a mission's start."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot
+
+    return pyplot
 
 
 def world_label(world: str) -> str:
@@ -34,6 +45,7 @@ def _column(rows: Sequence[Mapping[str, Any]], key: str) -> np.ndarray:
 
 def plot_coverage(rows: Sequence[Mapping[str, Any]], path: Path, title: str = "") -> None:
     """3D / 2D coverage and 3D overlap (%) over sim time, bounding volume on a second axis."""
+    plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7, 4), dpi=110)
     t = _column(rows, "sim_time_s")
     for key, label in (("coverage_3d_pct", "3D coverage"), ("coverage_2d_pct", "2D coverage"),
@@ -60,6 +72,7 @@ def plot_map_top(
     title: str = "",
 ) -> None:
     """The merged map seen from above (colour = height), trajectories and last frontiers."""
+    plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7, 6), dpi=110)
     pts = np.asarray(points_world).reshape(-1, 3)
     if len(pts) > MAX_MAP_POINTS:
@@ -90,6 +103,7 @@ def plot_methods_coverage(
     key_label: str = "3D coverage (%)",
 ) -> None:
     """Fig. 5 style: mean coverage over sim time per method (band = ± std over seeds)."""
+    plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7, 4), dpi=110)
     for method, runs in curves.items():
         runs = [(t, c) for t, c in runs if len(t)]

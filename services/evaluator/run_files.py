@@ -10,7 +10,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import open3d as o3d
 import yaml
 
 from schemas import messages as m
@@ -19,25 +18,70 @@ _EMPTY_PLY = (
     "ply\nformat ascii 1.0\nelement vertex 0\nproperty double x\nproperty double y\n"
     "property double z\nend_header\n"
 )
+# PLY scalar types as numpy little-endian dtypes (both the spec's names and the sized ones)
+_PLY_TYPES = {"char": "i1", "uchar": "u1", "short": "<i2", "ushort": "<u2", "int": "<i4",
+              "uint": "<u4", "float": "<f4", "double": "<f8", "int8": "i1", "uint8": "u1",
+              "int16": "<i2", "uint16": "<u2", "int32": "<i4", "uint32": "<u4",
+              "float32": "<f4", "float64": "<f8"}
 
 
 def write_ply(path: Path, points_world: np.ndarray, colors: np.ndarray | None = None) -> None:
-    if len(points_world) == 0:  # open3d refuses to write an empty cloud; a robot may map nothing
+    """Binary little-endian PLY: double x, y, z (and uchar red, green, blue), the layout
+    Open3D writes, with numpy: importing Open3D (and the dash/plotly its visualization module
+    pulls in) cost each mission's launcher about 3 CPU-s."""
+    if len(points_world) == 0:  # a robot may map nothing
         path.write_text(_EMPTY_PLY)
         return
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_world.astype(np.float64)))
-    if colors is not None and len(colors):
-        cloud.colors = o3d.utility.Vector3dVector(colors.astype(np.float64) / 255.0)
-    if not o3d.io.write_point_cloud(str(path), cloud, write_ascii=False):
-        raise OSError(f"could not write {path}")
+    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
+    with_colors = colors is not None and len(colors) > 0
+    if with_colors:
+        fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
+    rows = np.empty(len(points_world), dtype=fields)
+    xyz = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
+    rows["x"], rows["y"], rows["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    if with_colors:
+        rgb = np.asarray(colors).reshape(-1, 3).astype(np.uint8)
+        rows["red"], rows["green"], rows["blue"] = rgb[:, 0], rgb[:, 1], rgb[:, 2]
+    header = ["ply", "format binary_little_endian 1.0", f"element vertex {len(rows)}"]
+    header += [f"property {'double' if t == '<f8' else 'uchar'} {n}" for n, t in fields]
+    path.write_bytes(("\n".join([*header, "end_header"]) + "\n").encode() + rows.tobytes())
 
 
 def read_ply(path: Path) -> np.ndarray:
-    """(N, 3) float64 points of a PLY written by `write_ply` (empty when the cloud is)."""
-    if path.read_bytes() == _EMPTY_PLY.encode():
+    """(N, 3) float64 points of a point-cloud PLY (ascii or binary little-endian, a vertex
+    element with x, y, z among scalar properties: what `write_ply` and Open3D write)."""
+    data = path.read_bytes()
+    end = data.find(b"end_header")
+    if not data.startswith(b"ply") or end < 0:
+        raise ValueError(f"{path}: not a PLY file")
+    body = data.index(b"\n", end) + 1
+    lines = data[:body].decode("ascii").splitlines()
+    fmt = next((ln.split()[1] for ln in lines if ln.startswith("format ")), "")
+    elements = [ln.split() for ln in lines if ln.startswith(("element ", "property "))]
+    if not elements or elements[0][:2] != ["element", "vertex"]:
+        raise ValueError(f"{path}: no vertex element first")
+    count, fields = int(elements[0][2]), []
+    for words in elements[1:]:
+        if words[0] == "element":
+            break
+        if words[1] == "list" or words[1] not in _PLY_TYPES:
+            raise ValueError(f"{path}: unsupported vertex property {' '.join(words[1:])}")
+        fields.append((words[2], _PLY_TYPES[words[1]]))
+    if missing := {"x", "y", "z"} - {n for n, _ in fields}:
+        raise ValueError(f"{path}: no vertex property {sorted(missing)}")
+    if count == 0:
         return np.zeros((0, 3))
-    cloud = o3d.io.read_point_cloud(str(path))
-    return np.asarray(cloud.points, dtype=np.float64).reshape(-1, 3)
+    if fmt == "ascii":
+        rows = np.loadtxt(data[body:].decode("ascii").splitlines()[:count], ndmin=2,
+                          dtype=np.float64).reshape(count, len(fields))
+        names = [n for n, _ in fields]
+        cols = [rows[:, names.index(a)] for a in "xyz"]
+    elif fmt == "binary_little_endian":
+        rows = np.frombuffer(data, dtype=fields, count=count, offset=body)
+        cols = [rows[a] for a in "xyz"]
+    else:
+        raise ValueError(f"{path}: unsupported PLY format {fmt!r}")
+    return np.stack(cols, axis=1).astype(np.float64).reshape(-1, 3)
 
 
 def write_grid(stem: Path, grid: m.OccupancyGrid) -> None:
