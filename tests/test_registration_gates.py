@@ -1,4 +1,5 @@
-"""Pairwise registration gates: the fit's residual, the planar condition, the shift."""
+"""Pairwise registration gates: the fit's residual, the planar condition, the shift, the
+faces paired back to back."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import pytest
 from services.common.geometry import T_from_xyyaw, invert
 from services.common.registration import (
     RegistrationParams,
+    opposed_fraction,
     overlapping_pairs,
     planar_condition,
     prepare,
@@ -125,3 +127,45 @@ def test_world_boxes_of_many_equal_each_box_moved_alone() -> None:
         moved = corners @ T[:3, :3].T + T[:3, 3]
         assert np.allclose(got, [moved.min(0), moved.max(0)], atol=1e-12)
         assert np.array_equal(world_box(box, T), got)
+
+
+def _face(y: float, side: float) -> np.ndarray:
+    """One face of a 10 cm partition along x (2 m high, 2 cm spacing) and a 0.3 m strip of
+    floor beside it, on the `side` (+1 north, −1 south) it is seen from."""
+    s = 0.02
+    x = np.arange(0.0, 4.0, s)
+    wall = np.stack(np.meshgrid(x, [y], np.arange(0.0, 2.0, s)), -1).reshape(-1, 3)
+    strip = y + side * np.arange(s, 0.3, s)
+    floor = np.stack(np.meshgrid(x, strip, [0.0]), -1).reshape(-1, 3)
+    return np.concatenate([wall, floor])
+
+
+def _in_frame(points_world: np.ndarray, T_world_submap: np.ndarray) -> np.ndarray:
+    T = invert(T_world_submap)
+    return points_world @ T[:3, :3].T + T[:3, 3]
+
+
+def test_the_two_faces_of_a_partition_are_not_laid_on_each_other() -> None:
+    """Robots on either side of a partition see faces 10 cm apart; GICP pairs them (the AWS
+    house's west room: six registrations 10.5-11.4 cm off). The back-to-back gate rejects it;
+    a robot on the same side as the target still registers."""
+    T_north, T_south = T_from_xyyaw(2.0, 1.5, 0.0), T_from_xyyaw(2.0, -1.4, 0.0)
+    off = RegistrationParams(sigma_m=0.05)
+    gated = RegistrationParams(sigma_m=0.05, max_opposed_frac=0.15)
+    target = prepare(_in_frame(_face(0.1, +1.0), T_north), off)
+    across = prepare(_in_frame(_face(0.0, -1.0), T_south), off)
+    T_true = invert(T_north) @ T_south
+    laid = register(target, across, T_true, off)
+    assert laid is not None  # the failure: the south face moved onto the north one
+    assert abs((invert(T_true) @ laid.T_target_source)[1, 3] - 0.1) < 0.02
+    assert opposed_fraction(target, across, laid.T_target_source, off.fine_corr_m,
+                            np.asarray(off.viewpoint_m)) > 0.9
+    assert register(target, across, T_true, gated) is None
+    T_beside = T_from_xyyaw(2.6, 1.2, 0.2)
+    same_side = prepare(_in_frame(_face(0.1, +1.0), T_beside), off)
+    T_init = invert(T_north) @ T_from_xyyaw(2.63, 1.18, 0.21)
+    kept = register(target, same_side, T_init, gated)
+    assert kept is not None
+    placed_world = T_north @ kept.T_target_source
+    # across the wall (world y) it is right; along it a plain wall cannot say
+    assert abs(placed_world[1, 3] - T_beside[1, 3]) < 0.01

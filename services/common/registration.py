@@ -7,11 +7,14 @@ partner and it moved the estimate less than a gate (a registration that wanders 
 likely a wrong basin than a correction). Two optional gates judge the fit itself: the GICP
 residual per inlier (a registration 5-10 cm off leaves surfaces apart that its inliers still
 pair) and the planar condition (strongest over weakest translational information in the
-plane: shelves and aisles that repeat slide along themselves). small_gicp's Hessian H is
-already in GTSAM's convention (rotation first, right perturbation of T_target_source); its
-absolute scale depends on point count and covariances, so it is rescaled to a mean
-translational σ of `sigma_m` before the robust kernels judge residuals (field notes), keeping
-its shape (weak directions of a corridor stay weak).
+plane: shelves and aisles that repeat slide along themselves), and the faces it pairs: each
+point's surface normal turned toward where its submap was seen from, a registration whose
+pairs are too often back to back has matched the two faces of one thin wall (robots on
+either side of a partition see faces 10 cm apart, and GICP lays one on the other).
+small_gicp's Hessian H is already in GTSAM's convention (rotation first, right perturbation
+of T_target_source); its absolute scale depends on point count and covariances, so it is
+rescaled to a mean translational σ of `sigma_m` before the robust kernels judge residuals
+(field notes), keeping its shape (weak directions of a corridor stay weak).
 """
 
 from __future__ import annotations
@@ -39,6 +42,8 @@ class RegistrationParams:
     sigma_m: float = 0.01
     max_mean_error: float = float("inf")  # GICP residual per inlier (small_gicp's `error`)
     max_planar_condition: float = float("inf")  # strongest / weakest planar translation info
+    max_opposed_frac: float = 1.0  # of the flat pairs, back to back at most this share (1: off)
+    viewpoint_m: tuple[float, float, float] = (0.0, 0.0, 0.35)  # the camera, submap frame
 
 
 @dataclass(frozen=True)
@@ -111,6 +116,41 @@ def planar_condition(H: np.ndarray) -> float:
     return float(strongest / weakest) if weakest > 0 else float("inf")
 
 
+def flat_normals(covs: np.ndarray, points: np.ndarray, viewpoint: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 3) unit normals (each neighbourhood's least-spread axis) turned toward
+    `viewpoint`, and (N,) whether the neighbourhood is flat (least spread under a fifth of
+    the middle one), of points with (N, 3, 3) neighbourhood covariances."""
+    spread, axes = np.linalg.eigh(covs)
+    normals = axes[:, :, 0]
+    away = np.einsum("ij,ij->i", normals, viewpoint - points) < 0
+    normals[away] *= -1.0
+    return normals, spread[:, 0] < 0.2 * spread[:, 1]
+
+
+def opposed_fraction(target: Prepared, source: Prepared, T_target_source: np.ndarray,
+                     corr_m: float, viewpoint: np.ndarray) -> float:
+    """Of the source's fine points within `corr_m` of a target point where both are flat,
+    the share whose normals, each turned toward its own submap's viewpoint, are back to back
+    (cosine < −0.5) among those that are parallel either way (|cosine| > 0.5)."""
+    src_cloud, (tgt_cloud, tgt_tree) = source.fine[0], target.fine
+    R, t = T_target_source[:3, :3], T_target_source[:3, 3]
+    src_points = np.asarray(src_cloud.points())[:, :3]
+    moved = src_points @ R.T + t
+    found, sq_dist = tgt_tree.batch_nearest_neighbor_search(moved, num_threads=1)
+    found, near = np.asarray(found), np.asarray(sq_dist) <= corr_m**2
+    if not near.any():
+        return 0.0
+    j = found[near]
+    n_src, flat_src = flat_normals(np.asarray(src_cloud.covs())[near, :3, :3],
+                                   src_points[near], viewpoint)
+    n_tgt, flat_tgt = flat_normals(np.asarray(tgt_cloud.covs())[j, :3, :3],
+                                   np.asarray(tgt_cloud.points())[j, :3], viewpoint)
+    cos = np.einsum("ij,ij->i", n_src @ R.T, n_tgt)[flat_src & flat_tgt]
+    parallel, opposed = np.count_nonzero(cos > 0.5), np.count_nonzero(cos < -0.5)
+    return opposed / max(parallel + opposed, 1)
+
+
 def scaled_info(H: np.ndarray, sigma_m: float) -> np.ndarray:
     """H rescaled so its translational block has mean diagonal 1/σ²; symmetrised."""
     H = 0.5 * (H + H.T)
@@ -161,6 +201,9 @@ def register(
             or np.linalg.norm(step[:3]) > params.max_turn_rad
             or res.error > params.max_mean_error * max(res.num_inliers, 1)
             or (params.max_planar_condition < float("inf")
-                and planar_condition(res.H) > params.max_planar_condition)):
+                and planar_condition(res.H) > params.max_planar_condition)
+            or (params.max_opposed_frac < 1.0
+                and opposed_fraction(target, source, res.T_target_source, params.fine_corr_m,
+                                     np.asarray(params.viewpoint_m)) > params.max_opposed_frac)):
         return None
     return PairResult(res.T_target_source.copy(), scaled_info(res.H, params.sigma_m), frac)

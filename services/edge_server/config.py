@@ -247,6 +247,13 @@ class EdgeConfig(BaseModel):
         default=20.0, ge=0, description="a registration whose planar translation "
         "information is this much weaker in one direction than the other is rejected (0: no "
         "test)")
+    # the two faces of a partition laid on each other: AWS house, seed 3 (size exponent
+    # 0.25): six robot 0 / robot 2 registrations 10.5-11.4 cm off, back to back 0.04-0.68,
+    # every right one of 144 in two missions at most 0.07 (docs/edge.md, "Two faces")
+    merge_max_opposed_frac: float = Field(
+        default=0.15, ge=0, le=1, description="a registration whose flat point pairs are "
+        "back to back (normals turned toward each submap's camera) more often than this "
+        "share has matched the two faces of a thin wall, and is rejected (1: no test)")
     merge_agent_frame: bool = Field(
         default=False, description="odometry edges and PCM's chains from the submap poses in "
         "each agent's own frame (Submap.T_odom_submap), which corrections never move, instead "

@@ -105,7 +105,9 @@ def merger_params(config: EdgeConfig) -> MergerParams:
         registration=RegistrationParams(
             sigma_m=config.merge_registration_sigma_m, max_shift_m=config.merge_max_shift_m,
             max_mean_error=config.merge_max_mean_error or float("inf"),
-            max_planar_condition=config.merge_max_condition or float("inf")),
+            max_planar_condition=config.merge_max_condition or float("inf"),
+            max_opposed_frac=config.merge_max_opposed_frac,
+            viewpoint_m=(0.0, 0.0, config.camera_height_m)),
         consistency=ConsistencyParams(
             tol_m=config.merge_pcm_tol_m, tol_m_per_m=config.merge_pcm_tol_m_per_m,
             tol_rad=config.merge_pcm_tol_rad, tol_rad_per_m=config.merge_pcm_tol_rad_per_m,
