@@ -6,10 +6,16 @@ import csv
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from services.config import SpacemapConfig
 from services.evaluator import tables as tb
-from services.evaluator.plots import plot_coverage, plot_map_top, plot_methods_coverage
+from services.evaluator.plots import (
+    plot_coverage,
+    plot_map_top,
+    plot_methods_coverage,
+    top_heights,
+)
 from services.launcher.bench import mission_config
 
 
@@ -93,6 +99,17 @@ def test_plots_are_written(tmp_path: Path) -> None:
                           tmp_path / "fig5.png")
     for name in ("cov.png", "map.png", "fig5.png"):
         _png_ok(tmp_path / name)
+
+
+def test_the_map_from_above_keeps_each_columns_highest_point() -> None:
+    points = np.array([[0.01, 0.01, 0.2], [0.02, 0.03, 1.5], [0.04, 0.02, 0.7],
+                       [0.26, 0.11, 0.3], [-0.04, 0.12, 2.0]])
+    top, extent = top_heights(points, 0.05)
+    assert extent == pytest.approx((-0.05, 0.30, 0.0, 0.15))
+    assert top.shape == (3, 7)
+    assert top[0, 1] == 1.5  # three points in one column: the highest
+    assert top[2, 6] == 0.3 and top[2, 0] == 2.0
+    assert np.isnan(top).sum() == top.size - 3
 
 
 def test_a_run_folder_names_its_bench_method() -> None:

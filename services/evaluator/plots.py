@@ -12,7 +12,7 @@ import numpy as np
 if TYPE_CHECKING:
     from matplotlib import pyplot
 
-MAX_MAP_POINTS = 60_000  # subsample for a readable, fast scatter
+MAP_CELL_M = 0.05  # the map from above: one pixel per voxel column
 
 
 def _pyplot() -> pyplot:
@@ -64,23 +64,39 @@ def plot_coverage(rows: Sequence[Mapping[str, Any]], path: Path, title: str = ""
     plt.close(fig)
 
 
+def top_heights(points_world: np.ndarray, cell_m: float
+                ) -> tuple[np.ndarray, tuple[float, float, float, float]]:
+    """(H, W) highest z of the points in each `cell_m` column seen from above (NaN where
+    none), and its (x0, x1, y0, y1) extent: the map from above as one image, which draws in
+    a fraction of the time a scatter of its points takes."""
+    pts = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
+    lo = np.floor(pts[:, :2].min(axis=0) / cell_m) * cell_m
+    ij = np.floor((pts[:, :2] - lo) / cell_m).astype(np.int64)
+    shape = (int(ij[:, 1].max()) + 1, int(ij[:, 0].max()) + 1)
+    top = np.full(shape, -np.inf)
+    np.maximum.at(top, (ij[:, 1], ij[:, 0]), pts[:, 2])
+    top[np.isinf(top)] = np.nan
+    return top, (lo[0], lo[0] + shape[1] * cell_m, lo[1], lo[1] + shape[0] * cell_m)
+
+
 def plot_map_top(
     points_world: np.ndarray,
     trajectories_xy: Sequence[np.ndarray],
     frontiers_xy: np.ndarray,
     path: Path,
     title: str = "",
+    cell_m: float = MAP_CELL_M,
 ) -> None:
-    """The merged map seen from above (colour = height), trajectories and last frontiers."""
+    """The merged map seen from above (colour = the highest point's z in each `cell_m`
+    column), trajectories and last frontiers."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7, 6), dpi=110)
     pts = np.asarray(points_world).reshape(-1, 3)
-    if len(pts) > MAX_MAP_POINTS:
-        pts = pts[np.random.default_rng(0).choice(len(pts), MAX_MAP_POINTS, replace=False)]
-    order = np.argsort(pts[:, 2])  # high points drawn last, as seen from above
-    sc = ax.scatter(pts[order, 0], pts[order, 1], c=pts[order, 2], s=0.5, cmap="viridis")
     if len(pts):
-        fig.colorbar(sc, ax=ax, label="z (m)", shrink=0.8)
+        top, extent = top_heights(pts, cell_m)
+        image = ax.imshow(top, origin="lower", extent=extent, cmap="viridis",
+                          interpolation="nearest")
+        fig.colorbar(image, ax=ax, label="z (m)", shrink=0.8)
     for robot, xy in enumerate(trajectories_xy):
         if len(xy):
             ax.plot(xy[:, 0], xy[:, 1], lw=1.5, label=f"robot {robot}")
@@ -90,7 +106,8 @@ def plot_map_top(
         ax.plot(fxy[:, 0], fxy[:, 1], "rx", ms=6, label="frontiers")
     ax.set(xlabel="x (m)", ylabel="y (m)", title=title or "merged map from above")
     ax.set_aspect("equal")
-    ax.legend(loc="upper right", fontsize=7)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="upper right", fontsize=7)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
