@@ -187,3 +187,19 @@ def test_the_tail_drops_specks_once_the_regions_are_few() -> None:
     kept = tail_planner(EdgeConfig(**base, space_tail_fraction=0.02), 1000)._without_tail_specks(
         fs, far, 10)
     assert kept.sizes.tolist() == [200, 12]
+
+
+def test_the_size_factor_waits_for_the_late_regions() -> None:
+    """Sizes count once the assignable F_u voxels are down to `space_size_from_fraction` of
+    the map: early on every room is a large region and sizes would pull the team apart."""
+    reachable = np.ones((10, 10), bool)
+    fs = side_by_side([150, 12, 40], [False, False, True])  # 162 F_u voxels of 1000
+    base = dict(planner="space", space_size_exponent=0.5)
+    late = tail_planner(EdgeConfig(**base, space_size_from_fraction=0.2), 1000)
+    assert late._scorer_for(fs, reachable, 10) is late.scorer
+    early = tail_planner(EdgeConfig(**base, space_size_from_fraction=0.1), 1000)
+    chosen = early._scorer_for(fs, reachable, 10)
+    assert chosen is early.early_scorer and chosen is not early.scorer
+    assert early.early_scorer.config.space_size_exponent == 0.0  # type: ignore[attr-defined]
+    always = tail_planner(EdgeConfig(**base), 1000)
+    assert always._scorer_for(fs, reachable, 10) is always.scorer is always.early_scorer

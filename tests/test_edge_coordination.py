@@ -180,6 +180,20 @@ def test_a_large_region_outbids_a_speck_nearer_only_when_sizes_count() -> None:
     np.testing.assert_allclose(sized[0, 0], plain[0, 0])
 
 
+def test_sizes_under_the_reference_keep_their_information() -> None:
+    """With `space_size_ref_voxels`, regions up to that size score as without sizes, a larger
+    F_u region × (size / ref)^exponent, and a weak region of any size as without sizes."""
+    robot = RobotStates(np.zeros((1, 2)), np.zeros(1), np.zeros((0, 2)))
+    fs = replace(regions([(2.0, 0.0), (6.0, 0.0), (-6.0, 0.0)], [0.3, 0.3, 0.3]),
+                 sizes=np.array([150, 800, 800]), weak=np.array([False, False, True]))
+    path = np.array([[2.0, 6.0, 6.0]])
+    plain = make_scorer("space", EdgeConfig()).score(path, fs, robot)
+    sized = make_scorer("space", EdgeConfig(space_size_exponent=0.5, space_size_ref_voxels=200)
+                        ).score(path, fs, robot)
+    np.testing.assert_allclose(sized[0, [0, 2]], plain[0, [0, 2]])
+    np.testing.assert_allclose(sized[0, 1], plain[0, 1] * 2.0)
+
+
 def test_a_lower_time_exponent_lets_a_far_cluster_outbid_a_near_speck() -> None:
     """One region 1 m ahead against three within view of a goal 6 m ahead: per second of
     travel the near one wins; with the time counted at power 0.5 the far cluster does."""

@@ -105,7 +105,8 @@ class SpaceScorer:
             min_time_s=c.revenue_min_path_m / c.nav_v_mps, grid_gain_per_m=c.space_grid_gain_per_m,
             grid_view_m=c.space_grid_view_m,
             teammate_radius_m=c.space_teammate_radius_m or c.space_view_radius_m,
-            size_exponent=c.space_size_exponent, size_ref=float(c.unexplored_min_voxels),
+            size_exponent=c.space_size_exponent,
+            size_ref=float(c.space_size_ref_voxels or c.unexplored_min_voxels),
             partition_discount=c.space_partition_discount, time_exponent=c.space_time_exponent,
             view_gain_per_m2=c.space_view_gain_per_m2, view_range_m=c.space_view_range_m)
 

@@ -124,7 +124,7 @@ def coordinated_revenue(
     With `grid_gain_per_m`, a goal is also worth that much per metre of 2D grid frontier
     near it (`frontiers.grid_frontier_m`), discounted where a teammate's goal is as near.
     `teammate_radius_m` (default `view_radius_m`): how near a teammate's goal discounts.
-    `size_exponent` > 0: each region's information × (its size / `size_ref`)^that.
+    `size_exponent` > 0: each F_u region's information × max(1, its size / `size_ref`)^that.
     `partition_discount` < 1: a goal nearer a teammate than the robot counts that much
     (`partition_factor`). `view_gain_per_m2`: per m² of unknown floor in sight of f′
     (`frontiers.unknown_view_m2`), discounted near a teammate's goal. `time_exponent` < 1:
@@ -137,7 +137,8 @@ def coordinated_revenue(
     info = imp * gain * teammate_factor(frontiers.centroid_xy, robots.held_goals_xy,
                                         teammate_radius_m, teammate_discount)
     if size_exponent > 0:
-        info = info * (np.maximum(frontiers.sizes, 1) / size_ref) ** size_exponent
+        factor = np.maximum(frontiers.sizes / size_ref, 1.0) ** size_exponent
+        info = info * (factor if frontiers.weak is None else np.where(frontiers.weak, 1.0, factor))
     view = view_information(frontiers.goal_xy, frontiers.centroid_xy, info, view_radius_m)
     if grid_gain_per_m > 0 and frontiers.grid_frontier_m is not None:
         view = view + grid_gain_per_m * frontiers.grid_frontier_m * teammate_factor(

@@ -28,7 +28,7 @@ from schemas.messages import (
     Submap,
 )
 from services.common.grid import GridSpec
-from services.edge_server.assignment import make_scorer
+from services.edge_server.assignment import Scorer, make_scorer
 from services.edge_server.completion import CompletionJudge, VisitLog
 from services.edge_server.config import EdgeConfig
 from services.edge_server.frontier_cache import IncrementalFrontiers
@@ -119,6 +119,10 @@ class EdgePlanner:
         self.book = GoalBook(config)
         self.judge = CompletionJudge(config, tick_s)
         self.scorer = make_scorer(config.planner, config)
+        # before space_size_from_fraction is reached, the same scorer without the size factor
+        self.early_scorer = (make_scorer(config.planner,
+                                         config.model_copy(update={"space_size_exponent": 0.0}))
+                             if config.space_size_from_fraction < 1 else self.scorer)
         self.poses: dict[int, Pose2D] = {}
         self.dead: set[int] = set()
         self.last_grid: GridSnapshot | None = None
@@ -261,6 +265,15 @@ class EdgePlanner:
             return fs
         return subset(fs, fs.weak | (fs.sizes >= cfg.space_tail_min_voxels))
 
+    def _scorer_for(self, fs: FrontierSet, reachable: np.ndarray, tick: int) -> Scorer:
+        """The scorer with its size factor once the assignable F_u voxels are down to
+        `space_size_from_fraction` of the merged map, without it before: late in a mission a
+        large region left across the house waited for specks and made the last trip."""
+        if (self.early_scorer is not self.scorer and self._unexplored_voxels(fs, reachable, tick)
+                > self.config.space_size_from_fraction * len(self.merged)):
+            return self.early_scorer
+        return self.scorer
+
     def _with_unseen_floor(self, fs: FrontierSet, snap: GridSnapshot, reachable: np.ndarray,
                            goal_edt: GoalTransform, tick: int) -> FrontierSet:
         """`space` with `floor_unseen_min_m2`: the unseen floor patches join the regions
@@ -357,7 +370,8 @@ class EdgePlanner:
             fs = grid_as_unexplored(detect_frontiers(snap.free, snap.known, reachable, spec,
                                                      fallback, goal_edt))
         poses = np.array([[self.poses[r].x, self.poses[r].y, self.poses[r].yaw] for r in robots])
-        result = self.book.plan(tick, robots, fields, fs, spec, self.scorer, poses)
+        result = self.book.plan(tick, robots, fields, fs, spec,
+                                self._scorer_for(fs, reachable, tick), poses)
         fraction = (None if fell_back or self.config.planner != "space"  # the paper's: as written
                     else result.unexplored_voxels / max(len(self.merged), 1))
         log.debug("plan tick %d: unexplored fraction %s", tick, fraction)
