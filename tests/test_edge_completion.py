@@ -201,5 +201,5 @@ def test_the_size_factor_waits_for_the_late_regions() -> None:
     chosen = early._scorer_for(fs, reachable, 10)
     assert chosen is early.early_scorer and chosen is not early.scorer
     assert early.early_scorer.config.space_size_exponent == 0.0  # type: ignore[attr-defined]
-    always = tail_planner(EdgeConfig(**base), 1000)
+    always = tail_planner(EdgeConfig(**base, space_size_from_fraction=1.0), 1000)
     assert always._scorer_for(fs, reachable, 10) is always.scorer is always.early_scorer

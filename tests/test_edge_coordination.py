@@ -172,9 +172,10 @@ def test_a_large_region_outbids_a_speck_nearer_only_when_sizes_count() -> None:
     robot = RobotStates(np.zeros((1, 2)), np.zeros(1), np.zeros((0, 2)))
     fs = replace(regions([(2.0, 0.0), (6.0, 0.0)], [0.3, 0.3]), sizes=np.array([8, 1211]))
     path = np.array([[2.0, 6.0]])
-    plain = make_scorer("space", EdgeConfig()).score(path, fs, robot)
+    plain = make_scorer("space", EdgeConfig(space_size_exponent=0)).score(path, fs, robot)
     assert int(np.argmax(plain[0])) == 0
-    sized = make_scorer("space", EdgeConfig(space_size_exponent=0.5)).score(path, fs, robot)
+    sized = make_scorer("space", EdgeConfig(space_size_exponent=0.5, space_size_ref_voxels=0)
+                        ).score(path, fs, robot)
     assert int(np.argmax(sized[0])) == 1
     # the weight is relative to the smallest region the detector keeps: a minimal one × 1
     np.testing.assert_allclose(sized[0, 0], plain[0, 0])
@@ -187,7 +188,7 @@ def test_sizes_under_the_reference_keep_their_information() -> None:
     fs = replace(regions([(2.0, 0.0), (6.0, 0.0), (-6.0, 0.0)], [0.3, 0.3, 0.3]),
                  sizes=np.array([150, 800, 800]), weak=np.array([False, False, True]))
     path = np.array([[2.0, 6.0, 6.0]])
-    plain = make_scorer("space", EdgeConfig()).score(path, fs, robot)
+    plain = make_scorer("space", EdgeConfig(space_size_exponent=0)).score(path, fs, robot)
     sized = make_scorer("space", EdgeConfig(space_size_exponent=0.5, space_size_ref_voxels=200)
                         ).score(path, fs, robot)
     np.testing.assert_allclose(sized[0, [0, 2]], plain[0, [0, 2]])

@@ -95,15 +95,15 @@ class EdgeConfig(BaseModel):
         "(0: space_view_radius_m)")
     space_joint: bool = Field(default=True, description="assignment problem instead of greedy")
     space_size_exponent: float = Field(
-        default=0.0, ge=0, le=1, description="`space`: an F_u region's information also grows as "
+        default=0.5, ge=0, le=1, description="`space`: an F_u region's information also grows as "
         "(its voxels / unexplored_min_voxels)^this, so a large region outbids a speck at the "
         "same distance; 0: I_t·I_g alone, whatever the size")
     space_size_ref_voxels: int = Field(
-        default=0, ge=0, description="`space` with space_size_exponent: the size factor is "
+        default=200, ge=0, description="`space` with space_size_exponent: the size factor is "
         "max(1, voxels / this)^exponent, so regions up to this size keep their information; "
         "0: unexplored_min_voxels")
     space_size_from_fraction: float = Field(
-        default=1.0, gt=0, le=1, description="`space` with space_size_exponent: the size "
+        default=0.01, gt=0, le=1, description="`space` with space_size_exponent: the size "
         "factor applies once the assignable F_u voxels are at most this fraction of the "
         "merged map (late in a mission, when a large region left far away would be the last "
         "trip); 1: always")
