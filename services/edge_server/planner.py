@@ -122,7 +122,8 @@ class EdgePlanner:
         # before space_size_from_fraction is reached, the same scorer without the size factor
         self.early_scorer = (make_scorer(config.planner,
                                          config.model_copy(update={"space_size_exponent": 0.0}))
-                             if config.space_size_from_fraction < 1 else self.scorer)
+                             if config.planner == "space" and config.space_size_exponent > 0
+                             and config.space_size_from_fraction < 1 else self.scorer)
         self.poses: dict[int, Pose2D] = {}
         self.dead: set[int] = set()
         self.last_grid: GridSnapshot | None = None
