@@ -9,6 +9,7 @@ import pytest
 from services.common.geometry import T_from_xyyaw, invert
 from services.common.registration import (
     RegistrationParams,
+    flat_normals,
     opposed_fraction,
     overlapping_pairs,
     planar_condition,
@@ -169,3 +170,21 @@ def test_the_two_faces_of_a_partition_are_not_laid_on_each_other() -> None:
     placed_world = T_north @ kept.T_target_source
     # across the wall (world y) it is right; along it a plain wall cannot say
     assert abs(placed_world[1, 3] - T_beside[1, 3]) < 0.01
+
+
+def test_a_submaps_normals_are_computed_once_and_match_any_subsets() -> None:
+    """The back-to-back gate reads each fine point's normal from one decomposition of the
+    whole cloud, kept with the submap: the rows are bit for bit those of the subset's own."""
+    params = RegistrationParams(sigma_m=0.05)
+    prepared = prepare(_face(0.1, +1.0), params)
+    viewpoint = np.asarray(params.viewpoint_m)
+    points, normals, flat = prepared.fine_normals(viewpoint)
+    assert prepared.fine_normals(viewpoint)[1] is normals  # kept, not recomputed
+    cloud = prepared.fine[0]
+    rows = np.random.default_rng(0).integers(0, len(points), 500)
+    sub_normals, sub_flat = flat_normals(np.asarray(cloud.covs())[rows, :3, :3],
+                                         np.asarray(cloud.points())[rows, :3], viewpoint)
+    assert np.array_equal(normals[rows], sub_normals) and np.array_equal(flat[rows], sub_flat)
+    assert flat.mean() > 0.8  # a wall and a floor: flat nearly everywhere
+    other = prepared.fine_normals(viewpoint + 1.0)[1]
+    assert other is not normals  # another viewpoint, its own normals

@@ -19,7 +19,7 @@ rescaled to a mean translational σ of `sigma_m` before the robust kernels judge
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import small_gicp
@@ -133,19 +133,17 @@ def opposed_fraction(target: Prepared, source: Prepared, T_target_source: np.nda
     """Of the source's fine points within `corr_m` of a target point where both are flat,
     the share whose normals, each turned toward its own submap's viewpoint, are back to back
     (cosine < −0.5) among those that are parallel either way (|cosine| > 0.5)."""
-    src_cloud, (tgt_cloud, tgt_tree) = source.fine[0], target.fine
     R, t = T_target_source[:3, :3], T_target_source[:3, 3]
-    src_points = np.asarray(src_cloud.points())[:, :3]
+    src_points, src_normals, src_flat = source.fine_normals(viewpoint)
     moved = src_points @ R.T + t
-    found, sq_dist = tgt_tree.batch_nearest_neighbor_search(moved, num_threads=1)
+    found, sq_dist = target.fine[1].batch_nearest_neighbor_search(moved, num_threads=1)
     found, near = np.asarray(found), np.asarray(sq_dist) <= corr_m**2
     if not near.any():
         return 0.0
     j = found[near]
-    n_src, flat_src = flat_normals(np.asarray(src_cloud.covs())[near, :3, :3],
-                                   src_points[near], viewpoint)
-    n_tgt, flat_tgt = flat_normals(np.asarray(tgt_cloud.covs())[j, :3, :3],
-                                   np.asarray(tgt_cloud.points())[j, :3], viewpoint)
+    _, tgt_normals, tgt_flat = target.fine_normals(viewpoint)
+    n_src, flat_src = src_normals[near], src_flat[near]
+    n_tgt, flat_tgt = tgt_normals[j], tgt_flat[j]
     cos = np.einsum("ij,ij->i", n_src @ R.T, n_tgt)[flat_src & flat_tgt]
     parallel, opposed = np.count_nonzero(cos > 0.5), np.count_nonzero(cos < -0.5)
     return opposed / max(parallel + opposed, 1)
@@ -165,6 +163,21 @@ class Prepared:
     coarse: tuple[small_gicp.PointCloud, small_gicp.KdTree]
     fine: tuple[small_gicp.PointCloud, small_gicp.KdTree]
     n_fine: int
+    _normals: dict[tuple[float, ...], tuple[np.ndarray, np.ndarray, np.ndarray]] = field(
+        default_factory=dict, compare=False, repr=False)
+
+    def fine_normals(self, viewpoint: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(points (N, 3), normals (N, 3), flat (N,)) of the fine cloud, as `flat_normals`
+        gives them, computed once per viewpoint: a submap is judged against many others, and
+        each point's eigen-decomposition is its own, so rows taken from the whole cloud's
+        are the rows a subset's call would give."""
+        key = tuple(float(v) for v in viewpoint)
+        if key not in self._normals:
+            cloud = self.fine[0]
+            points = np.asarray(cloud.points())[:, :3]
+            self._normals[key] = (points, *flat_normals(
+                np.asarray(cloud.covs())[:, :3, :3], points, np.asarray(viewpoint)))
+        return self._normals[key]
 
 
 def prepare(points_submap: np.ndarray, params: RegistrationParams) -> Prepared:
