@@ -217,10 +217,7 @@ class AgentCore:
         self._ensure_grid(pose_world)
         if frame is not None:
             deltas += self._integrate(frame, cam, points_base, T_loc_base, T_world_base, odom.tick)
-        # The first frame's delta goes out at once: sent at the next multiple of the period it
-        # would miss the edge's first plan (stamped at that plan's tick), a second without goals.
-        if odom.tick % self.config.submap_every_ticks == 0 or (
-                frame is not None and self.n_frames == 1):
+        if odom.tick % self.config.submap_every_ticks == 0:
             delta = self.mapper.take_delta()
             deltas += [delta] if delta is not None else []
         events = self._navigate_goal_inputs(pose_world, odom.tick)
