@@ -189,6 +189,19 @@ def test_the_tail_drops_specks_once_the_regions_are_few() -> None:
     assert kept.sizes.tolist() == [200, 12]
 
 
+def test_the_tail_can_leave_weak_regions_to_the_end() -> None:
+    """`space_tail_weak=False`: in the tail only F_u regions are goals (completion waits for
+    them alone); before the tail, weak regions stay."""
+    reachable = np.ones((10, 10), bool)
+    fs = side_by_side([200, 12, 40], [False, False, True])  # a region, a speck, a weak region
+    base = dict(planner="space", space_tail_min_voxels=20, space_tail_weak=False)
+    tail = tail_planner(EdgeConfig(**base, space_tail_fraction=0.3), 1000)
+    kept = tail._without_tail_specks(fs, reachable, 10)
+    assert kept.sizes.tolist() == [200] and kept.weak.tolist() == [False]
+    early = tail_planner(EdgeConfig(**base, space_tail_fraction=0.1), 1000)
+    assert len(early._without_tail_specks(fs, reachable, 10)) == 3
+
+
 def test_the_size_factor_waits_for_the_late_regions() -> None:
     """Sizes count once the assignable F_u voxels are down to `space_size_from_fraction` of
     the map: early on every room is a large region and sizes would pull the team apart."""

@@ -319,5 +319,8 @@ class EdgeConfig(BaseModel):
     space_tail_min_voxels: int = Field(
         default=50, ge=0, description="`space`: in the tail, F_u regions smaller than this are "
         "no goal (0 = off; docs/edge.md, \"Specks in the tail\")")
+    space_tail_weak: bool = Field(
+        default=True, description="`space`: F_w regions stay goals in the tail (False: once "
+        "the tail begins only F_u regions are, and robots finish what completion waits for)")
     complete_unexplored_plans: int = Field(
         default=6, ge=1, description="consecutive plans under complete_unexplored_fraction")

@@ -264,7 +264,8 @@ class EdgePlanner:
                 or self._unexplored_voxels(fs, reachable, tick)
                 > cfg.space_tail_fraction * len(self.merged)):
             return fs
-        return subset(fs, fs.weak | (fs.sizes >= cfg.space_tail_min_voxels))
+        weak = fs.weak if cfg.space_tail_weak else np.zeros(len(fs), bool)
+        return subset(fs, weak | (~fs.weak & (fs.sizes >= cfg.space_tail_min_voxels)))
 
     def _scorer_for(self, fs: FrontierSet, reachable: np.ndarray, tick: int) -> Scorer:
         """The scorer with its size factor once the assignable F_u voxels are down to
