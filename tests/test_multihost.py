@@ -121,10 +121,10 @@ def test_mission_across_hosts_survives_a_cut_link_and_a_killed_agent(
         wait_for(lambda: observer.t >= 5.0, 180, "5 s of sim time", group)
 
         # Cut agent 0's link: the router declares it gone, the mission goes on without it. The
-        # lease (2 s) is the usual delay; when data for agent 0 is still queued at the cut,
-        # closing its link waits out zenoh's fixed 10 s SO_LINGER first (ARCHITECTURE.md).
+        # lease (2 s) is the usual delay; reliable traffic still flowing toward agent 0 at the
+        # cut can hold it up much longer (ARCHITECTURE.md, bench/bench_cut_link.py).
         hosts.link("a0", up=False)
-        wait_for(lambda: not observer.alive("agent/0"), 40, "agent 0 declared gone", group)
+        wait_for(lambda: not observer.alive("agent/0"), 60, "agent 0 declared gone", group)
         t_cut = observer.t
         wait_for(lambda: observer.t >= t_cut + 10.0, 60, "10 s of sim without agent 0", group)
         hosts.link("a0", up=True)
