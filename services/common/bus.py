@@ -26,6 +26,7 @@ from schemas.arrays import DEFAULT_MAX_ARRAY_BYTES
 from schemas.messages import Message
 from services.common.access import load_credential
 from services.common.inbox import Inbox
+from services.common.liveliness import LivelinessWatch
 from services.common.tls import TLS_KEY, TlsError, client_tls, is_tls
 
 log = logging.getLogger(__name__)
@@ -200,6 +201,7 @@ class Bus:
         self._logged: set[tuple[str, str]] = set()
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._handles: list[object] = []
+        self._liveliness: LivelinessWatch | None = None
         self._lock = threading.Lock()
 
     # -- inbound ---------------------------------------------------------------------------
@@ -227,17 +229,14 @@ class Bus:
         self._handles.append(self.session.declare_subscriber(key_expr, _direct(on_sample)))
 
     def watch_liveliness(self) -> None:
-        """Push a Presence for every current and future `alive/**` token."""
-
-        def on_token(sample: zenoh.Sample) -> None:
-            alive = sample.kind == zenoh.SampleKind.PUT
-            self.inbox.put(("alive", str(sample.key_expr), alive, None))
-
-        self._handles.append(
-            self.session.liveliness().declare_subscriber(
-                self.keys.alive_all(), _direct(on_token), history=True
+        """Push a Presence for every current and future `alive/**` token, and for a token
+        the router dropped without its DELETE reaching us (services.common.liveliness)."""
+        if self._liveliness is None:
+            self._liveliness = LivelinessWatch(
+                self.session, self.keys.alive_all(),
+                lambda key, alive: self.inbox.put(("alive", key, alive, None)),
+                interval_s=max(1.0, self.config.lease_s / 2),
             )
-        )
 
     def declare_alive(self, role: str, ident: int | str = 0) -> None:
         self._handles.append(self.session.liveliness().declare_token(self.keys.alive(role, ident)))
@@ -312,6 +311,9 @@ class Bus:
         raise TimeoutError(f"no reply on {key} within {timeout} s")
 
     def close(self) -> None:
+        if self._liveliness is not None:
+            self._liveliness.close()
+            self._liveliness = None
         for handle in reversed(self._handles):
             undeclare = getattr(handle, "undeclare", None)
             if undeclare is not None:

@@ -14,6 +14,33 @@ from services.common.tls import TlsError, is_tls, router_names, router_tls
 
 log = logging.getLogger(__name__)
 
+TCP_RETRIES2 = Path("/proc/sys/net/ipv4/tcp_retries2")
+RECOMMENDED_TCP_RETRIES2 = 5  # TCP gives up on a dead peer after about 12.6 s
+
+
+def tcp_give_up_s(retries2: int, rto_min_s: float = 0.2, rto_max_s: float = 120.0) -> float:
+    """How long Linux retransmits unacknowledged data before failing the connection, from
+    `net.ipv4.tcp_retries2` (the kernel's bound: exponential backoff from the minimum RTO)."""
+    return sum(min(rto_min_s * 2**i, rto_max_s) for i in range(retries2 + 1))
+
+
+def check_tcp_retries2(path: Path = TCP_RETRIES2) -> int | None:
+    """Warn when this host keeps retrying a dead client's data long: a TLS client whose link
+    is cut while data is queued toward it keeps its liveliness token (and the lockstep clock
+    waits for it) until TCP gives up (ARCHITECTURE.md, "A cut link"). The setting's value,
+    None where it cannot be read."""
+    try:
+        retries2 = int(path.read_text())
+    except (OSError, ValueError):
+        return None
+    if retries2 > RECOMMENDED_TCP_RETRIES2:
+        log.warning("net.ipv4.tcp_retries2=%d on this host: a client cut off while data is "
+                    "queued toward it is declared gone only after about %.0f s; set %d "
+                    "(about %.0f s) on the router's host (sysctl, or the compose file's "
+                    "sysctls)", retries2, tcp_give_up_s(retries2), RECOMMENDED_TCP_RETRIES2,
+                    tcp_give_up_s(RECOMMENDED_TCP_RETRIES2))
+    return retries2
+
 
 def default_listen(credentials: str | None, tls: bool) -> list[str]:
     """Where `spacemap router` listens without --listen: TLS when it has credentials."""
@@ -60,6 +87,7 @@ def run_router(
         secure["tls"] = router_tls(credentials)
         zenoh.init_log_from_env_or("warn")  # refused handshakes (unknown CA, no certificate)
         log.info("mutual TLS: certificate for %s", ", ".join(router_names(credentials)))
+        check_tcp_retries2()
     elif credentials is not None:
         log.warning("plain TCP: logins and traffic are not encrypted (bus.tls=false)")
     session = zenoh.open(zenoh_config("router", listen=listen, lease_s=lease_s, **secure))

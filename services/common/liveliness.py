@@ -1,0 +1,113 @@
+"""Who is alive: zenoh liveliness events, checked against the router's tokens.
+
+A process learns that a peer is gone from the DELETE of the peer's liveliness token. When a
+peer's link is cut while reliable traffic is queued toward it, the router can drop the token
+without that DELETE reaching every subscriber (measured: `bench/bench_cut_link.py`; a
+subscriber that waits on it, such as the lockstep simulator, would wait for ever). So each
+watch also asks the router which tokens it holds, every `interval_s`, and declares gone a
+peer that its events still call alive but that the router has not held for two queries in a
+row with no event about it in between.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable, Mapping
+
+import zenoh
+
+log = logging.getLogger(__name__)
+
+QUERY_TIMEOUT_S = 1.0
+
+
+def departed(candidates: Mapping[str, int], suspects: Mapping[str, int],
+             held: set[str]) -> tuple[list[str], dict[str, int]]:
+    """Keys to declare gone, and the suspects for the next query.
+
+    `candidates`: key → generation (event counter at its last PUT) of every key the events
+    call alive; `suspects`: the same for the keys the previous query did not find; `held`:
+    the keys the router holds now. A key is gone when the router missed it twice with the
+    same generation (no event about it in between)."""
+    gone: list[str] = []
+    missing: dict[str, int] = {}
+    for key, generation in candidates.items():
+        if key in held:
+            continue
+        if suspects.get(key) == generation:
+            gone.append(key)
+        else:
+            missing[key] = generation
+    return sorted(gone), missing
+
+
+class LivelinessWatch:
+    """Every current and future token under `key_expr`, delivered in order as
+    `deliver(key, alive)` (on a zenoh thread, or the watch's own for a reconciled departure)."""
+
+    def __init__(self, session: zenoh.Session, key_expr: str,
+                 deliver: Callable[[str, bool], None], interval_s: float) -> None:
+        self.session = session
+        self.key_expr = key_expr
+        self.deliver = deliver
+        self.interval_s = interval_s
+        self.reconciled = 0  # departures declared by the check, not by an event
+        self._alive: dict[str, int] = {}
+        self._suspects: dict[str, int] = {}
+        self._generation = 0
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._subscriber = session.liveliness().declare_subscriber(
+            key_expr, zenoh.handlers.Callback(self._on_token, indirect=False), history=True)
+        self._thread = threading.Thread(target=self._check_loop, name="liveliness-check",
+                                        daemon=True)
+        self._thread.start()
+
+    def _on_token(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        alive = sample.kind == zenoh.SampleKind.PUT
+        with self._lock:
+            self._generation += 1
+            if alive:
+                self._alive[key] = self._generation
+            elif self._alive.pop(key, None) is None:
+                return  # already declared gone by the check: say it once
+            self.deliver(key, alive)
+
+    def held(self) -> set[str] | None:
+        """The keys the router holds now; None when the query fails."""
+        try:
+            replies = self.session.liveliness().get(self.key_expr, timeout=QUERY_TIMEOUT_S)
+            return {str(r.ok.key_expr) for r in replies if r.ok is not None}
+        except zenoh.ZError as exc:
+            log.debug("liveliness query failed: %s", exc)
+            return None
+
+    def check(self) -> list[str]:
+        """One comparison with the router; the keys it declared gone."""
+        with self._lock:
+            before = dict(self._alive)
+        held = self.held()
+        if held is None:
+            return []
+        with self._lock:
+            candidates = {k: g for k, g in before.items() if self._alive.get(k) == g}
+            gone, self._suspects = departed(candidates, self._suspects, held)
+            for key in gone:
+                del self._alive[key]
+                self._generation += 1
+                self.reconciled += 1
+                log.warning("%s: the router no longer holds this token but its DELETE never "
+                            "came; declared gone", key)
+                self.deliver(key, False)
+        return gone
+
+    def _check_loop(self) -> None:
+        while not self._stop.wait(self.interval_s):
+            self.check()
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=QUERY_TIMEOUT_S + 1.0)
+        self._subscriber.undeclare()
