@@ -51,6 +51,22 @@ def test_z_crop_returns_only_low_voxels():
     _check(inc, _cloud(rng, 2000), z_max=0.5)
 
 
+def test_z_crop_keeps_no_cell_above_the_cap_and_stays_exact_through_changes():
+    # cells above the highest centre read are not kept; voxels up to r_s above it still count
+    rng = np.random.default_rng(4)
+    z_max = 0.42  # centres up to lattice z 7 are read
+    inc = IncrementalFrontiers(V, R, DD, DV, z_max_m=z_max)
+    keys = _cloud(rng, 3000)  # z 0..19: most of the cloud above the cap
+    _check(inc, keys, z_max=z_max)
+    assert inc.stats.lo[2] + inc.stats.dims[2] == 10  # cells up to z_cap = floor(8.4) + 1 = 9
+    more = np.union1d(keys, _cloud(rng, 900, lo=6))  # grows, much of it in the band
+    _check(inc, more, z_max, added=np.setdiff1d(more, keys))
+    low = np.union1d(more, _cloud(rng, 500, lo=-40))  # below: the box grows down
+    _check(inc, low, z_max)
+    gone = low[rng.random(low.size) < 0.3]
+    _check(inc, np.setdiff1d(low, gone), z_max, added=np.zeros(0, np.int64), removed=gone)
+
+
 def test_incremental_obstacle_cells_equal_a_fresh_grid() -> None:
     from services.common.geometry import T_from_xyyaw
     from services.edge_server.config import EdgeConfig

@@ -19,17 +19,21 @@ from services.edge_server.ball_sums import MAX_K, pack_fields, unpack_fields
 from services.edge_server.frontiers3d import PointFrontiers, ball_offsets, full_ball_variance
 
 CHUNK_VOX = 32  # the box grows in steps of this many voxels per axis (few reallocations)
+CHUNK_Z_VOX = 8  # ... and up: a map's height is set by its first frames
 GROW_FRACTION = 4  # ... and a side that grows, by at least this fraction of the box
 
 
 class LatticeStats:
     """Dense per-cell neighbourhood sums (ρ, Σo, Σ|o|², packed) over a growing box."""
 
-    def __init__(self, radius_vox: float) -> None:
+    def __init__(self, radius_vox: float, z_cap: int | None = None) -> None:
+        """`z_cap`: the highest lattice z of a cell that will be read (None: no limit); cells
+        above are not kept, nor voxels whose ball cannot reach a kept cell."""
         self.offsets = ball_offsets(radius_vox)
         if len(self.offsets) > MAX_K:
             raise ValueError("r_s > 3 voxels overflows the packed sums (FIELD_BITS)")
         self.pad = int(np.abs(self.offsets).max())
+        self.z_cap = z_cap
         self.lo = np.zeros(3, np.int64)
         self.dims = np.zeros(3, np.int64)
         self.sums = np.zeros(0, np.int64)
@@ -53,6 +57,8 @@ class LatticeStats:
         idx_lo, idx_hi = column_extremes(idx)
         lo = idx_lo - self.pad
         hi = idx_hi + self.pad + 1
+        if self.z_cap is not None:
+            hi[2] = min(hi[2], self.z_cap + 1)
         if self.sums.size and (lo >= self.lo).all() and (hi <= self.lo + self.dims).all():
             return
         if self.sums.size:
@@ -62,8 +68,12 @@ class LatticeStats:
             margin = np.maximum(self.dims // GROW_FRACTION, CHUNK_VOX)
             lo = np.where(lo < self.lo, lo - margin, self.lo)
             hi = np.where(hi > old_hi, hi + margin, old_hi)
-        new_lo = np.floor_divide(lo, CHUNK_VOX) * CHUNK_VOX
-        new_dims = -np.floor_divide(-(hi - new_lo), CHUNK_VOX) * CHUNK_VOX
+        chunk = np.array([CHUNK_VOX, CHUNK_VOX, CHUNK_Z_VOX])
+        new_lo = np.floor_divide(lo, chunk) * chunk
+        new_hi = new_lo - np.floor_divide(-(hi - new_lo), chunk) * chunk
+        if self.z_cap is not None:
+            new_hi[2] = min(new_hi[2], self.z_cap + 1)
+        new_dims = new_hi - new_lo
         grown = np.zeros(new_dims, np.int64)
         if self.sums.size:
             a = self.lo - new_lo
@@ -74,14 +84,24 @@ class LatticeStats:
 
     def apply(self, idx: np.ndarray, sign: int) -> None:
         """Add (sign +1) or remove (−1) unique voxels `idx` (M, 3) from the occupancy."""
+        if self.z_cap is not None:
+            idx = idx[idx[:, 2] <= self.z_cap + self.pad]  # the rest reach no kept cell
         if idx.shape[0] == 0:
             return
         self._fit(idx)
         flat = self._flat(idx)
         off_flat = self.offsets @ self._strides()
+        # voxels within `pad` of the cap reach cells above it, which the box does not hold
+        band = (idx[:, 2] > self.z_cap - self.pad if self.z_cap is not None
+                else np.zeros(idx.shape[0], bool))
+        band_flat, band_z = flat[band], idx[band, 2]
+        flat = flat[~band]
         for k in range(len(self.offsets)):
             # cell p = q − o sees q at offset +o; cells of one offset are distinct (no add.at)
             self.sums[flat - off_flat[k]] += sign * self._packed[k]
+            if band_flat.size:
+                kept = band_z - self.offsets[k, 2] <= self.z_cap
+                self.sums[band_flat[kept] - off_flat[k]] += sign * self._packed[k]
 
     def read(self, idx: np.ndarray) -> np.ndarray:
         """(5, N) int64 sums at voxels `idx` (must lie inside the box)."""
@@ -111,7 +131,10 @@ class IncrementalFrontiers:
         self.delta_d = delta_d
         self.delta_v_m2 = delta_v_m2
         self.z_max_m = z_max_m
-        self.stats = LatticeStats(radius_m / voxel_m)
+        # cells above the highest voxel centre read are never needed: one lattice z past
+        # z_max / voxel (≥ that centre's z: its float test is _low_enough's)
+        z_cap = int(np.floor(z_max_m / voxel_m)) + 1 if np.isfinite(z_max_m) else None
+        self.stats = LatticeStats(radius_m / voxel_m, z_cap)
         self.full_count = len(self.stats.offsets)
         self.full_var_m2 = full_ball_variance(self.stats.offsets) * voxel_m**2
         self.keys = np.zeros(0, np.int64)
