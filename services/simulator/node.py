@@ -178,7 +178,10 @@ class SimNode:
             if not warned and time.monotonic() - started > STALL_WARN_S:
                 warned = True
                 log.warning(
-                    "tick %d: still waiting for agents %s and the edge's ticks %s", k,
+                    "tick %d: still waiting for agents %s and the edge's ticks %s (their "
+                    "liveliness tokens are still held; a process cut off over TLS with data "
+                    "queued toward it keeps its token until the router host's TCP gives up: "
+                    "ARCHITECTURE.md, \"A cut link\")", k,
                     sorted(self.live_agents - self.answered), edge_due,
                 )
         return False
