@@ -7,8 +7,9 @@ import time
 
 import zenoh
 
+from services.common import liveliness
 from services.common.bus import Bus, BusConfig, Presence, zenoh_config
-from services.common.liveliness import LivelinessWatch, departed
+from services.common.liveliness import LivelinessWatch, complete_answer, departed
 
 
 def test_departed_needs_two_misses_with_no_event_between() -> None:
@@ -21,6 +22,45 @@ def test_departed_needs_two_misses_with_no_event_between() -> None:
     assert gone == [] and suspects == {"b": 5}
     # held again: no longer a suspect
     assert departed({"b": 5}, {"b": 5}, held={"b"}) == ([], {})
+
+
+def test_an_answer_is_evidence_only_in_time_and_with_our_own_tokens() -> None:
+    own = {"alive/edge/0"}
+    assert complete_answer({"alive/edge/0", "alive/sim/0"}, own, 0.01, 1.0)
+    assert complete_answer(set(), set(), 0.01, 1.0)  # nothing of ours to hold
+    assert not complete_answer(set(), own, 0.01, 1.0)  # the router left ours out: no answer
+    assert not complete_answer({"alive/edge/0"}, own, 1.0, 1.0)  # ran into its timeout
+
+
+def test_silent_or_late_answers_declare_no_one_gone(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """A loaded router's empty or late answers once declared every peer gone (the edge then
+    gave no goals and the mission ended at 46 s): they are skipped now; a complete answer
+    that misses a peer twice still declares it gone."""
+    seen: list[tuple[str, bool]] = []
+    with zenoh.open(zenoh_config("peer", listen=[])) as session:
+        own = "t/alive/edge/0"
+        token = session.liveliness().declare_token(own)
+        watch = LivelinessWatch(session, "t/alive/**", lambda k, a: seen.append((k, a)),
+                                interval_s=3600.0, own=lambda: {own})
+        try:
+            _wait(lambda: (own, True) in seen)
+            watch._on_token(_sample("t/alive/agent/1", zenoh.SampleKind.PUT))
+            answers = iter([set(), {"t/alive/agent/1"}, set()])  # silent, ours missing, silent
+            monkeypatch.setattr(watch, "_ask", lambda: next(answers))
+            assert [watch.check() for _ in range(3)] == [[], [], []]
+            monkeypatch.setattr(liveliness, "QUERY_TIMEOUT_S", 0.05)
+
+            def late() -> set[str]:
+                time.sleep(0.06)
+                return {own}
+            monkeypatch.setattr(watch, "_ask", late)
+            assert watch.check() == [] and watch.check() == []
+            assert watch.skipped == 5 and ("t/alive/agent/1", False) not in seen
+            monkeypatch.setattr(watch, "_ask", lambda: {own})  # in time, with ours
+            assert watch.check() == [] and watch.check() == ["t/alive/agent/1"]
+        finally:
+            watch.close()
+            token.undeclare()
 
 
 def _wait(cond, timeout_s: float = 5.0) -> None:  # type: ignore[no-untyped-def]

@@ -202,6 +202,7 @@ class Bus:
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._handles: list[object] = []
         self._liveliness: LivelinessWatch | None = None
+        self._own_tokens: list[str] = []  # alive/** keys this session declared
         self._lock = threading.Lock()
 
     # -- inbound ---------------------------------------------------------------------------
@@ -236,10 +237,13 @@ class Bus:
                 self.session, self.keys.alive_all(),
                 lambda key, alive: self.inbox.put(("alive", key, alive, None)),
                 interval_s=max(1.0, self.config.lease_s / 2),
+                own=lambda: set(self._own_tokens),
             )
 
     def declare_alive(self, role: str, ident: int | str = 0) -> None:
-        self._handles.append(self.session.liveliness().declare_token(self.keys.alive(role, ident)))
+        key = self.keys.alive(role, ident)
+        self._handles.append(self.session.liveliness().declare_token(key))
+        self._own_tokens.append(key)
 
     def poll(self, timeout: float | None = None) -> Inbound | Presence | None:
         """Next valid inbound item, or None when `timeout` passes with nothing valid."""
@@ -319,6 +323,7 @@ class Bus:
             if undeclare is not None:
                 undeclare()
         self._handles.clear()
+        self._own_tokens.clear()
         # what arrived but was never polled is validated too, so every bad message is counted
         # (a process stopped while busy would otherwise under-report)
         left = sum(1 for _ in self.drain())
