@@ -56,8 +56,13 @@ def test_silent_or_late_answers_declare_no_one_gone(monkeypatch) -> None:  # typ
             monkeypatch.setattr(watch, "_ask", late)
             assert watch.check() == [] and watch.check() == []
             assert watch.skipped == 5 and ("t/alive/agent/1", False) not in seen
-            monkeypatch.setattr(watch, "_ask", lambda: {own})  # in time, with ours
+            # two complete answers without it, then one with it: a glitch, not a departure
+            answers = iter([{own}, {own}, {own, "t/alive/agent/1"}])
+            monkeypatch.setattr(watch, "_ask", lambda: next(answers))
+            assert watch.check() == [] and watch.check() == []
+            monkeypatch.setattr(watch, "_ask", lambda: {own})  # in time, with ours, three times
             assert watch.check() == [] and watch.check() == ["t/alive/agent/1"]
+            assert seen.count(("t/alive/agent/1", False)) == 1
         finally:
             watch.close()
             token.undeclare()

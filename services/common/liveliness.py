@@ -6,10 +6,11 @@ without that DELETE reaching every subscriber (measured: `bench/bench_cut_link.p
 subscriber that waits on it, such as the lockstep simulator, would wait for ever). So each
 watch also asks the router which tokens it holds, every `interval_s`, and declares gone a
 peer that its events still call alive but that the router has not held for two queries in a
-row with no event about it in between. A query that ran into its timeout, or whose answer
-lacks a token this very session holds, is no evidence and is skipped: on a loaded machine a
-reply can come late or not at all, and taking its silence for departures once ended a mission
-at 46 s with every agent declared gone (docs/benchmarks.md, sixty-eighth session).
+row, nor in a third asked at once, with no event about it in between. A query that ran into
+its timeout, or whose answer lacks a token this very session holds, is no evidence and is
+skipped: the router now and then answers at once with no token at all, and two such answers
+in a row once declared every agent gone and ended a mission at 46 s (docs/benchmarks.md,
+sixty-eighth session).
 """
 
 from __future__ import annotations
@@ -113,7 +114,8 @@ class LivelinessWatch:
         return {str(r.ok.key_expr) for r in replies if r.ok is not None}
 
     def check(self) -> list[str]:
-        """One comparison with the router; the keys it declared gone."""
+        """One comparison with the router; the keys it declared gone. A key missed twice is
+        asked about once more at once: the router's bad answers come one at a time."""
         with self._lock:
             before = dict(self._alive)
         held = self.held()
@@ -122,6 +124,14 @@ class LivelinessWatch:
         with self._lock:
             candidates = {k: g for k, g in before.items() if self._alive.get(k) == g}
             gone, self._suspects = departed(candidates, self._suspects, held)
+        if not gone:
+            return []
+        again = self.held()
+        with self._lock:
+            if again is None:  # no evidence either way: still suspects
+                self._suspects.update({k: candidates[k] for k in gone})
+                return []
+            gone = [k for k in gone if k not in again and self._alive.get(k) == candidates[k]]
             for key in gone:
                 del self._alive[key]
                 self._generation += 1
