@@ -22,6 +22,9 @@ import json
 import statistics
 from pathlib import Path
 
+import numpy as np
+from compare_settings import relative_change
+
 
 def read_run(run: Path) -> tuple[dict, list[dict[str, float]]]:
     metrics = json.loads((run / "metrics.json").read_text())
@@ -103,6 +106,33 @@ def report(table: list[dict], reference: str, against: list[str]) -> None:
         for n in names:
             cells += [_mean([e[n][0] for e in group]), _mean([e[n][1] for e in group])]
         print(f"| {world} | {robots} | {len(group)} | " + " | ".join(cells) + " |")
+    _report_changes(table, reference, against)
+
+
+def _report_changes(table: list[dict], reference: str, against: list[str]) -> None:
+    """Each planner's time and distance at the level against the reference's, with the 95 %
+    bootstrap interval over the seeds (compare_settings.py's)."""
+    print(f"\nChange against {reference} at its level, 95 % bootstrap interval over the "
+          "paired seeds:\n")
+    print("| world | robots | " + " | ".join(f"{n} seeds | {n} time | {n} distance"
+                                          for n in against) + " |")
+    print("|---|---:|" + "---:|---|---|" * len(against))
+    rng = np.random.default_rng(0)
+    for world, robots in sorted({(e["world"], e["robots"]) for e in table}):
+        cells = []
+        for n in against:
+            group = [e for e in table if (e["world"], e["robots"]) == (world, robots)
+                     and e.get(n) and e[n][0] is not None and e[reference][0] is not None]
+            cells.append(str(len(group)))
+            for i in (0, 1):  # time, distance (a series without distances: left out)
+                pairs = [(e[reference][i], e[n][i]) for e in group
+                         if e[reference][i] is not None and e[n][i] is not None]
+                if not pairs:
+                    cells.append("–")
+                    continue
+                c, lo, hi = relative_change(*np.array(pairs, float).T, rng)
+                cells.append(f"{100 * c:+.1f} % ({100 * lo:+.1f} to {100 * hi:+.1f})")
+        print(f"| {world} | {robots} | " + " | ".join(cells) + " |")
 
 
 def main() -> None:

@@ -37,3 +37,5 @@ def test_times_at_the_reference_level(tmp_path: Path) -> None:
     assert "| house | 3 | 1 | 99.50 | 10 | 10 / 9.0 / 50.0 | never |" in out
     # the paired means use seed 0 only: seed 1's space run never reached the level
     assert "| house | 3 | 1 | 30.0 | 30.0 | 20.0 | 22.0 |" in out
+    # and as a change against rrt, with its interval (one seed: no spread)
+    assert "| house | 3 | 1 | -33.3 % (-33.3 to -33.3) | -26.7 % (-26.7 to -26.7) |" in out
