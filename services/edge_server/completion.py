@@ -62,17 +62,18 @@ class CompletionJudge:
         self.complete_tick: int | None = None
 
     def update(self, tick: int, assignable_frontiers: int, known_cells: int,
-               unexplored_fraction: float | None = None) -> bool:
+               unexplored_fraction: float | None = None, edge_ticks: int = 1) -> bool:
         """Record one plan's outcome; returns the (sticky) verdict. `unexplored_fraction`:
         the assignable F_u regions' voxels over the merged map's (None: not asked, as in a
-        grid-fallback plan)."""
+        grid-fallback plan). `edge_ticks`: the edge ticks this plan stands for (the ones
+        skipped since the last plan, plus its own), so the counts stay in edge ticks."""
         if self.complete:
             return True
         cfg = self.config
-        self.empty_plans = self.empty_plans + 1 if assignable_frontiers == 0 else 0
+        self.empty_plans = self.empty_plans + edge_ticks if assignable_frontiers == 0 else 0
         tail = (cfg.complete_unexplored_fraction > 0 and unexplored_fraction is not None
                 and unexplored_fraction <= cfg.complete_unexplored_fraction)
-        self.tail_plans = self.tail_plans + 1 if tail else 0
+        self.tail_plans = self.tail_plans + edge_ticks if tail else 0
         if (
             (self.empty_plans >= cfg.complete_after_plans
              or self.tail_plans >= cfg.complete_unexplored_plans)

@@ -13,6 +13,10 @@ class EdgeConfig(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
     planner: Literal["space", "space-paper", "nearest", "utility", "rrt"] = "space"
+    plan_every_edge_ticks: int = Field(
+        default=1, ge=1, description="a full plan every this many edge ticks, and at any edge "
+        "tick where an active robot holds no goal; the other edge ticks are acknowledged "
+        "unplanned (1: plan at every edge tick)")
     grid_resolution_m: float = Field(default=0.05, gt=0)
     voxel_m: float = Field(default=0.05, gt=0)
     # merged grid

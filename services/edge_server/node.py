@@ -139,8 +139,16 @@ class EdgeNode:
                 self.planner.on_pose(msg)
             elif isinstance(msg, GoalStatus):
                 self.planner.on_goal_status(msg)
-        if isinstance(msg, Clock) and msg.tick % self.config.sim.edge_every_ticks == 0:
-            self.plan_and_publish(msg.tick)
+        every = self.config.sim.edge_every_ticks
+        if isinstance(msg, Clock) and msg.tick % every == 0:
+            with self.lock:
+                due = self.planner.plan_due(msg.tick // every)
+                if not due:
+                    self.planner.skip()
+            if due:
+                self.plan_and_publish(msg.tick)
+            else:
+                self.bus.publish(self.bus.keys.edge_ack(), EdgeAck(tick=msg.tick))
 
     def plan_and_publish(self, tick: int) -> None:
         t0 = time.perf_counter()  # for the log only

@@ -118,6 +118,7 @@ class EdgePlanner:
         self.grid = MergedGrid(config)
         self.book = GoalBook(config)
         self.judge = CompletionJudge(config, tick_s)
+        self.skipped_edge_ticks = 0  # since the last plan (plan_every_edge_ticks)
         self.scorer = make_scorer(config.planner, config)
         # before space_size_from_fraction is reached, the same scorer without the size factor
         self.early_scorer = (make_scorer(config.planner,
@@ -157,6 +158,23 @@ class EdgePlanner:
             self.book.release(robot_id)
 
     # -- planning --------------------------------------------------------------------------
+    def plan_due(self, edge_tick: int) -> bool:
+        """Whether edge tick `edge_tick` needs a full plan (`plan_every_edge_ticks`): a robot
+        that reached, lost or never had a goal gets one at the next edge tick regardless."""
+        every = self.config.plan_every_edge_ticks
+        if every == 1 or edge_tick % every == 0 or self.judge.complete:
+            return True
+        return any(r not in self.book.active for r in self.active_robots())
+
+    def skip(self) -> None:
+        """An edge tick acknowledged without a plan: viewpoints are still logged."""
+        self.skipped_edge_ticks += 1
+        self._record_views(self.active_robots())
+
+    def _record_views(self, robots: list[int]) -> None:
+        for r in robots:
+            self.visits.record(r, self.poses[r].x, self.poses[r].y, self.poses[r].yaw)
+
     def active_robots(self) -> list[int]:
         return sorted(r for r in self.poses if r not in self.dead)
 
@@ -345,14 +363,14 @@ class EdgePlanner:
         self.merged.update(self.store)
         robots = self.active_robots()
         robot_xy = np.array([[self.poses[r].x, self.poses[r].y] for r in robots]).reshape(-1, 2)
-        for r in robots:
-            self.visits.record(r, self.poses[r].x, self.poses[r].y, self.poses[r].yaw)
+        self._record_views(robots)
+        edge_ticks, self.skipped_edge_ticks = 1 + self.skipped_edge_ticks, 0
         # Robots widen the grid only once there is data (no grid at all before that).
         extra_xy = robot_xy if self.store.submaps else None
         snap = self.grid.update(self.store, self.merged, extra_xy)
         self.last_grid = snap
         if snap is None:
-            complete = self.judge.update(tick, 0, 0)
+            complete = self.judge.update(tick, 0, 0, edge_ticks=edge_ticks)
             return PlanOutput(None, frontiers_message(tick, empty_frontiers((0, 0)), complete, {},
                                                       self.config.grid_resolution_m), [],
                               corrections)
@@ -377,7 +395,8 @@ class EdgePlanner:
         fraction = (None if fell_back or self.config.planner != "space"  # the paper's: as written
                     else result.unexplored_voxels / max(len(self.merged), 1))
         log.debug("plan tick %d: unexplored fraction %s", tick, fraction)
-        complete = self.judge.update(tick, result.assignable, int(snap.known.sum()), fraction)
+        complete = self.judge.update(tick, result.assignable, int(snap.known.sum()), fraction,
+                                     edge_ticks)
         grid_msg = OccupancyGrid(tick=tick, resolution_m=spec.resolution_m, origin_x=spec.origin_x,
                                  origin_y=spec.origin_y, cells=snap.cells)
         return PlanOutput(grid_msg, frontiers_message(tick, fs, complete, result.assigned,
