@@ -105,6 +105,9 @@ def replay(rec: Path, limit: int | None, overrides: dict[str, str] | None = None
         while fed < len(ordered) and inbox[ordered[fed]].tick < k:  # type: ignore[attr-defined]
             _feed(planner, inbox[ordered[fed]])
             fed += 1
+        if not planner.plan_due(k // every):  # edge.plan_every_edge_ticks, as node.py
+            planner.skip()
+            continue
         t0 = time.process_time()
         out = planner.plan(k)
         plan_s.append(time.process_time() - t0)

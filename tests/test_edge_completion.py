@@ -216,3 +216,15 @@ def test_the_size_factor_waits_for_the_late_regions() -> None:
     assert early.early_scorer.config.space_size_exponent == 0.0  # type: ignore[attr-defined]
     always = tail_planner(EdgeConfig(**base, space_size_from_fraction=1.0), 1000)
     assert always._scorer_for(fs, reachable, 10) is always.scorer is always.early_scorer
+
+
+def test_a_plan_that_stands_for_skipped_edge_ticks_counts_them() -> None:
+    config = EdgeConfig(complete_after_plans=4, complete_warmup_s=0.0,
+                        complete_min_known_cells=1)
+    every_tick, every_other = CompletionJudge(config, 0.1), CompletionJudge(config, 0.1)
+    assert [every_tick.update(10 * k, 0, 100) for k in range(1, 5)] == [False] * 3 + [True]
+    # plans at edge ticks 1, 2 and 4: the last stands for 3 and 4, so the same tick completes
+    assert not every_other.update(10, 0, 100)
+    assert not every_other.update(20, 0, 100)
+    assert every_other.update(40, 0, 100, edge_ticks=2)
+    assert every_other.complete_tick == every_tick.complete_tick == 40

@@ -12,11 +12,13 @@ from schemas.messages import (
     EdgeAck,
     Frontiers,
     Goal,
+    GoalStatus,
     GridRequest,
     OccupancyGrid,
 )
 from services.common.bus import Inbound, Presence
 from services.config import SpacemapConfig
+from services.edge_server.config import EdgeConfig
 from services.edge_server.node import EdgeNode
 from tests.test_edge_planning import corridor_planner, pose
 
@@ -78,3 +80,27 @@ def test_robot_cloud_and_robot_grid_queries() -> None:
     assert np.array_equal(grid.cells, merged.cells)  # one robot: its grid is the merged grid
     other = node.serve_robot_grid(encode(GridRequest(robot_id=1)))
     assert (other.cells == -1).all()
+
+
+def test_unplanned_edge_ticks_are_acknowledged_and_a_free_robot_brings_the_plan_back() -> None:
+    bus = FakeBus()
+    config = SpacemapConfig(edge=EdgeConfig(plan_every_edge_ticks=2))
+    node = EdgeNode(bus, config)  # type: ignore[arg-type]
+    node.planner = corridor_planner(EdgeConfig(planner="nearest", plan_every_edge_ticks=2))
+    node.handle(Inbound("spacemap/robot/0/pose", pose(0, 0.5)))
+
+    def kinds_at(tick: int) -> list[type]:
+        bus.sent.clear()
+        node.handle(clock(tick))
+        assert bus.sent[-1][1] == EdgeAck(tick=tick)
+        return [type(m) for _, m in bus.sent]
+
+    # edge tick 1 is not due, but robot 0 holds no goal yet
+    assert kinds_at(10) == [OccupancyGrid, Frontiers, Goal, EdgeAck]
+    goal = bus.sent[2][1]
+    assert kinds_at(20) == [OccupancyGrid, Frontiers, EdgeAck]  # due: planned, goal kept
+    assert kinds_at(30) == [EdgeAck]  # not due and every robot holds a goal
+    node.handle(Inbound("spacemap/robot/0/goal_status",
+                        GoalStatus(robot_id=0, tick=31, goal_id=goal.goal_id, status="reached")))
+    assert kinds_at(50) == [OccupancyGrid, Frontiers, Goal, EdgeAck]
+    assert node.unplanned == 1

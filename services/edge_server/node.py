@@ -99,6 +99,7 @@ class EdgeNode:
         self.tick_ms: list[float] = []
         self.all_plan_ms: list[float] = []
         self.cloud_queries = 0
+        self.unplanned = 0  # edge ticks acknowledged without a plan (edge.plan_every_edge_ticks)
         self.cloud_lock_s = 0.0  # wall time map/cloud answers held the lock (stalls the clock)
 
     def serve_cloud(self, body: bytes) -> Cloud:
@@ -148,6 +149,7 @@ class EdgeNode:
             if due:
                 self.plan_and_publish(msg.tick)
             else:
+                self.unplanned += 1
                 self.bus.publish(self.bus.keys.edge_ack(), EdgeAck(tick=msg.tick))
 
     def plan_and_publish(self, tick: int) -> None:
@@ -202,9 +204,10 @@ def main(config: SpacemapConfig) -> None:
                 node.handle(item)
             if node.planner.judge.complete and not complete_logged:
                 complete_logged = True
-                log.info("exploration complete at tick %s (all plans: median %.1f ms; goals "
-                         "not kept: %s)", node.planner.judge.complete_tick,
-                         statistics.median(node.all_plan_ms), dict(node.planner.book.drops))
+                log.info("exploration complete at tick %s (%d plans: median %.1f ms; %d edge "
+                         "ticks unplanned; goals not kept: %s)", node.planner.judge.complete_tick,
+                         node.plans, statistics.median(node.all_plan_ms), node.unplanned,
+                         dict(node.planner.book.drops))
     log.info("edge stopped (submap seq gaps: %s; %d map/cloud queries held the lock %.2f s)",
              dict(node.planner.store.seq_gaps), node.cloud_queries, node.cloud_lock_s)
     if config.edge.merge:
