@@ -4,7 +4,9 @@ answers equal a judgement of every held observation from scratch."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from services.edge_server import observations
 from services.edge_server.observations import ObservationTable
 
 
@@ -19,7 +21,12 @@ def judge_all(rows: dict[tuple[int, int], tuple[int, int, int]], submap_of_uid: 
     return {k: (r, u, i) for k, (r, _, i, u) in best.items()}
 
 
-def test_incremental_first_observers_equal_a_judgement_from_scratch() -> None:
+@pytest.mark.parametrize("fold_share", [0.0, 0.25, 1e9])
+def test_incremental_first_observers_equal_a_judgement_from_scratch(
+        fold_share: float, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Whichever run holds a row: every row in the main run (0: folded at once), the
+    default, and the recent run folded only by `compact` (a quarter of the rows dropped)."""
+    monkeypatch.setattr(observations, "FOLD_SHARE", fold_share)
     rng = np.random.default_rng(3)
     parts = 12
     robot_of = rng.integers(0, 3, parts)
@@ -28,6 +35,7 @@ def test_incremental_first_observers_equal_a_judgement_from_scratch() -> None:
     held: dict[tuple[int, int], tuple[int, int, int]] = {}  # (uid, idx) → (key, tick, robot)
     size = np.zeros(parts, int)
     state: dict[int, tuple[int, int, int]] = {}
+    recent_seen = False
     for step in range(80):
         for _ in range(int(rng.integers(1, 4))):  # parts grow
             uid = int(rng.integers(parts))
@@ -63,5 +71,8 @@ def test_incremental_first_observers_equal_a_judgement_from_scratch() -> None:
                 state.pop(k, None)
         assert state == judge_all(held, submap_of_uid), step
         assert len(table) == len(held)
+        recent_seen |= table.recent.size > 0
     table.compact()
     assert table.keys.size == len(held) and np.all(np.diff(table.keys) >= 0)
+    assert table.recent.size == 0
+    assert recent_seen == (fold_share > 0)  # the two-run states were exercised
