@@ -141,7 +141,7 @@ def instrument(core: AgentCore, timer: StageTimer) -> None:
     if walls is not None:
         walls.update = timer.wrap("- registration: wall heading", walls.update)
     reg = core.localizer.registrar
-    for attr in ("_cloud", "align", "insert"):
+    for attr in ("_cloud", "align", "insert", "flush"):
         setattr(reg, attr, timer.wrap(f"- registration: {attr.strip('_')}", getattr(reg, attr)))
     agent_mod.floor_rays = timer.wrap("- integration: free-space rays", agent_mod.floor_rays)
     core.mapper.integrate = timer.wrap("- integration: submap voxels", core.mapper.integrate)
@@ -213,14 +213,17 @@ def _tick(core: AgentCore, odom: Odometry, pending: list[Message], timer: StageT
     for earlier in due:
         _apply(core, earlier)
     camera = core.frame is not None and core.frame.tick <= odom.tick
-    outs = core.on_odometry(odom)
+    outs = core.on_odometry(odom, defer=True)  # as the node: CmdVel first, then the rest
     t1 = time.process_time()
+    outs += core.finish_tick()
+    t2 = time.process_time()
     for out in outs:
         produced[out.topic].append(encode(out.message))
-    t2 = time.process_time()
-    timer.add("encode outputs", t2 - t1)
-    timer.add("whole tick (apply + on_odometry)", t1 - t0)
-    timer.add("camera tick" if camera else "other tick", t1 - t0)
+    t3 = time.process_time()
+    timer.add("encode outputs", t3 - t2)
+    timer.add("whole tick (apply + on_odometry + finish_tick)", t2 - t0)
+    timer.add("camera tick, until CmdVel" if camera else "other tick", t1 - t0)
+    timer.add("finish_tick (after CmdVel)", t2 - t1)
     timer.close_tick()
 
 
@@ -246,7 +249,7 @@ def _pose_gap(expected: list[bytes], produced: list[bytes]) -> str:
 def report(timer: StageTimer) -> None:
     names = sorted({n for t in timer.ticks for n in t}, key=lambda n: -sum(
         t.get(n, 0.0) for t in timer.ticks))
-    total = sum(t.get("whole tick (apply + on_odometry)", 0.0) for t in timer.ticks)
+    total = sum(t.get("whole tick (apply + on_odometry + finish_tick)", 0.0) for t in timer.ticks)
     print(f"{len(timer.ticks)} ticks; whole ticks {total:.1f} s\n")
     print("| stage | total s | share of ticks % | median ms (ticks it ran) | p90 ms | ticks |")
     print("|---|---:|---:|---:|---:|---:|")

@@ -280,3 +280,58 @@ def test_a_frame_whose_heading_is_unsure_maps_only_its_near_points() -> None:
     assert ranges[0.0].max() > 4.5  # the far wall at x = 5 m
     assert len(ranges[2.0]) and ranges[2.0].max() < 0.03 / math.radians(2.0) + 0.1
     assert len(ranges[2.0]) < 0.5 * len(ranges[0.0])
+
+
+def _drive(core: AgentCore, ticks: int, mode: str) -> list[list[tuple[str, bytes]]]:
+    """(topic, encoded message) per tick of a run with a goal and a correction; `mode`:
+    'inline', 'deferred' (on_odometry(defer=True), then finish_tick, as the node does) or
+    'unfinished' (defer=True, finish_tick never called)."""
+    pose = (0.0, 0.0, 0.0)
+    per_tick = []
+    for k in range(ticks):
+        if k == 4:
+            core.on_goal(Goal(robot_id=0, tick=k, goal_id=7, x=3.5, y=-1.5,
+                              frontier_class="unexplored", revenue=1.0))
+        if k == 31:
+            core.on_correction(Correction(robot_id=0, tick=k, submap_ids=np.array([0], np.int32),
+                                          T_world_submap=T_from_xyyaw(0.3, -0.2, 0.05)[None]))
+        if k % 2 == 0:
+            core.on_rgbd(_frame(k, pose))
+        outs = core.on_odometry(_odom(k, pose), defer=mode != "inline")
+        cmd = outs[-1].message
+        assert isinstance(cmd, CmdVel) and cmd.tick == k  # the command is out first
+        if mode == "deferred":
+            late = core.finish_tick()
+            assert all(o.topic == "submap" for o in late)
+            outs = outs + late
+        per_tick.append([(o.topic, encode(o.message)) for o in outs])
+        x, y, yaw = pose
+        pose = (x + cmd.v_mps * math.cos(yaw) * 0.1, y + cmd.v_mps * math.sin(yaw) * 0.1,
+                yaw + cmd.omega_radps * 0.1)
+    return per_tick
+
+
+def _by_topic(messages: list[tuple[str, bytes]]) -> dict[str, list[bytes]]:
+    out: dict[str, list[bytes]] = {}
+    for topic, payload in messages:
+        out.setdefault(topic, []).append(payload)
+    return out
+
+
+def test_mapping_deferred_past_the_command_changes_no_message_and_no_state() -> None:
+    ticks = 90
+    inline = _drive(AgentCore(AgentConfig(), 0, 0.1), ticks, "inline")
+    deferred = _drive(AgentCore(AgentConfig(), 0, 0.1), ticks, "deferred")
+    # the same messages each tick (poses and commands depend on the registration map, the
+    # submaps on the voxels integrated); only the periodic delta moves behind the command
+    assert [_by_topic(t) for t in deferred] == [_by_topic(t) for t in inline]
+    assert sum(t == "submap" for tick in inline for t, _ in tick) >= 6
+    moved = [k for k, tick in enumerate(deferred) if tick and tick[-1][0] == "submap"]
+    assert moved and all(k % AgentConfig().submap_every_ticks == 0 for k in moved)
+    # a caller that never finishes a tick loses nothing: the late delta leads the next tick
+    unfinished = _drive(AgentCore(AgentConfig(), 0, 0.1), ticks, "unfinished")
+    got = _by_topic([m for tick in unfinished for m in tick])
+    want = _by_topic([m for tick in inline for m in tick])
+    assert got["cmd_vel"] == want["cmd_vel"] and got["pose"] == want["pose"]
+    assert got["submap"] == want["submap"][:len(got["submap"])]
+    assert len(got["submap"]) >= len(want["submap"]) - 1  # the last tick's may still wait

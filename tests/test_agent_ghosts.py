@@ -11,7 +11,7 @@ from services.robot_agent.agent import AgentCore
 from services.robot_agent.config import AgentConfig
 from services.robot_agent.drf import DrfParams, filter_mask
 from services.robot_agent.synthetic import T_world_cam_of, render
-from services.robot_agent.teammates import predict_xy
+from services.robot_agent.teammates import predict_xy, teammates_in_view
 from tests.test_agent_core import _frame, _odom
 from tests.test_agent_drf import ROOM, T_BASE_CAM, K, _robot_box
 from tests.test_agent_yield import yield_command
@@ -57,7 +57,8 @@ def test_teammate_predicted_forward_by_its_last_motion() -> None:
     core = AgentCore(AgentConfig(), 0, 0.1, team_size=1)
     core.on_pose(prev)
     core.on_pose(last)
-    seen = core._teammates_in_view((0.0, 2.0, 0.0), _frame(6, (0.0, 2.0, 0.0)), 6)
+    seen = teammates_in_view(core.teammates, core.teammates_prev, (0.0, 2.0, 0.0),
+                             _frame(6, (0.0, 2.0, 0.0)), 6, core.config)
     assert np.allclose(seen, [[1.10, 2.0]])
 
 

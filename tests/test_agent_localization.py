@@ -5,10 +5,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 import small_gicp
 
 from services.common.geometry import T_from_xyyaw, invert, transform_points, xyyaw_from_T
 from services.robot_agent.drift_filter import (
+    FilterParams,
     drop_weak_translation,
     translation_information_ratio,
 )
@@ -96,3 +98,27 @@ def test_localizer_removes_odometry_drift_in_a_room() -> None:
     assert math.hypot(*odom_error[:2]) > 0.07  # odometry alone would be 8 cm off ...
     assert max(e for e, _ in errors) < 0.01  # ... registration keeps within 1 cm
     assert max(a for _, a in errors) < math.radians(0.3)
+
+
+@pytest.mark.parametrize("filt", [None, FilterParams()], ids=["gate", "filter"])
+def test_deferred_inserts_reach_the_map_before_the_next_alignment(
+        filt: FilterParams | None) -> None:
+    """With `defer_inserts` a frame waits outside the registration map until `flush` or the
+    next alignment: poses are the same as inserting at once, whether flushed or not."""
+    rng = np.random.default_rng(3)
+    room = _room(rng)
+    frames = [(T_from_xyyaw(-1.5 + 0.05 * k, 0.2, 0.05 * math.sin(k / 6)),
+               T_from_xyyaw(0.002 * k, 0.0, 0.001 * k)) for k in range(12)]
+    poses = {}
+    for mode in ("inline", "flushed", "at alignment"):
+        loc = Localizer(RegistrationParams(map_voxel_m=0.05, degenerate_ratio=0.05, filter=filt))
+        loc.registrar.defer_inserts = mode != "inline"
+        poses[mode] = []
+        for T_world_base, drift in frames:
+            out = loc.update(_seen(room, T_world_base), T_world_base @ drift)
+            poses[mode].append(out.T_loc_base)
+            assert (len(loc.registrar.pending) > 0) == (mode != "inline")
+            if mode == "flushed":
+                loc.registrar.flush()
+    assert np.array_equal(np.stack(poses["flushed"]), np.stack(poses["inline"]))
+    assert np.array_equal(np.stack(poses["at alignment"]), np.stack(poses["inline"]))

@@ -82,3 +82,22 @@ def _odom(tick: int) -> Inbound:
     return Inbound("spacemap/robot/3/odom", Odometry(
         robot_id=3, tick=tick, stamp_ns=tick, v_mps=0.0, omega_radps=0.0,
         pose_odom=Pose2D(x=0.0, y=0.0, yaw=0.0)))
+
+
+def test_late_submap_follows_cmd_vel_except_just_before_an_edge_tick() -> None:
+    """A frame's voxels and the periodic Submap delta may go out after CmdVel(k), but not at
+    tick k = E − 1 of an edge tick E: the edge plans E on every message of ticks < E."""
+    from tests.test_agent_core import _frame
+
+    bus, core, pending = FakeBus(), AgentCore(AgentConfig(submap_every_ticks=1), 0, 0.1), []
+    order = {}
+    for tick in range(6):
+        core.on_rgbd(_frame(tick, (0.0, 0.0, 0.0)))
+        bus.sent.clear()
+        handle(bus, core, Inbound("spacemap/robot/0/odom", Odometry(  # type: ignore[arg-type]
+            robot_id=0, tick=tick, stamp_ns=tick, v_mps=0.0, omega_radps=0.0,
+            pose_odom=Pose2D(x=0.0, y=0.0, yaw=0.0))), 0.1, pending, 0, 5)
+        order[tick] = [k.rsplit("/", 1)[-1] for k, _ in bus.sent]
+    assert order[3][-2:] == ["cmd_vel", "submap"]  # deferred: tick 4 is no edge tick
+    assert order[4][-1] == "cmd_vel" and "submap" in order[4]  # tick 5 is
+    assert all(o.count("cmd_vel") == 1 for o in order.values())

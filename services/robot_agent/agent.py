@@ -2,7 +2,10 @@
 
 `AgentCore.on_odometry(k)` is the lockstep tick handler: it integrates the RGB-D frame of tick
 k (received just before), then returns, in order, RobotPose, Submap deltas, GoalStatus changes
-and last CmdVel(k).
+and last CmdVel(k). With `defer=True` the work CmdVel(k) does not need (the frame's voxels into
+the submap, the frame into the registration map, and the tick's periodic submap delta) waits
+for `finish_tick()`, which the node calls once CmdVel(k) is out, so the simulator's next tick
+overlaps it; the state after `finish_tick` and every message are the same as without.
 
 Pose chain: T_world_base = T_world_loc · T_loc_odom · T_odom_base. `odom` is the drifting wheel
 odometry, `loc` the frame registration keeps consistent (localization.py; submaps live in it),
@@ -16,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -38,7 +42,6 @@ from services.common.geometry import (
     xyyaw_from_T,
 )
 from services.common.inventory import inventory_of
-from services.robot_agent.awareness import in_view_partial, visible_paper
 from services.robot_agent.config import AgentConfig
 from services.robot_agent.drf import filter_mask
 from services.robot_agent.exploration import LocalExplorer
@@ -48,8 +51,8 @@ from services.robot_agent.localization import Localizer
 from services.robot_agent.navigation import Command, Navigator, StatusEvent
 from services.robot_agent.outbox import Outbox, Outgoing, TickResult
 from services.robot_agent.params import drf_params, loop_params, registration_params
-from services.robot_agent.projection import cam_to_base, depth_to_points, hfov_of, pixel_colors
-from services.robot_agent.teammates import predict_xy, teammates_xy
+from services.robot_agent.projection import cam_to_base, depth_to_points, pixel_colors
+from services.robot_agent.teammates import teammates_in_view, teammates_xy
 from services.robot_agent.view_voxels import CameraView, whole_voxel_mask
 from services.robot_agent.yielding import YieldRule
 
@@ -116,6 +119,10 @@ class AgentCore:
         self.resend_pending = False
         self.explorer = LocalExplorer(config, robot_id)
         self.outbox = Outbox(robot_id, config.cell_m)
+        self.defer = False  # this tick's submap integration waits for `finish_tick`
+        self.deferred: list[Callable[[], None]] = []  # ... these
+        # (tick, stamp_ns, T_world_loc, epoch) of the periodic delta that waits for them
+        self.late: tuple[int, int, np.ndarray, int] | None = None
 
     # -- inputs that only update state -------------------------------------------------------
     def on_rgbd(self, frame: RgbdFrame) -> None:
@@ -185,7 +192,26 @@ class AgentCore:
             self.T_world_loc = T_world_submap @ invert(self.mapper.pose_of(sid))
 
     # -- the tick ----------------------------------------------------------------------------
-    def on_odometry(self, odom: Odometry) -> list[Outgoing]:
+    def finish_tick(self) -> list[Outgoing]:
+        """The deferred work of the last `on_odometry(defer=True)`, and its late messages
+        (the periodic Submap delta, if that tick took one)."""
+        work, self.deferred = self.deferred, []
+        for add_voxels in work:
+            add_voxels()
+        self.localizer.registrar.flush()
+        late, self.late = self.late, None
+        delta = self.mapper.take_delta() if late is not None else None
+        if late is None or delta is None:
+            return []
+        return [Outgoing("submap", self.outbox.submap(delta, *late))]
+
+    def on_odometry(self, odom: Odometry, defer: bool = False) -> list[Outgoing]:
+        """Tick k's messages, CmdVel(k) last; with `defer`, call `finish_tick` next."""
+        early = self.finish_tick()  # a caller that did not: its late messages go out now
+        self.defer = self.localizer.registrar.defer_inserts = defer
+        return early + self._tick(odom)
+
+    def _tick(self, odom: Odometry) -> list[Outgoing]:
         if self.epoch is None:
             self.epoch = odom.tick
             self.mapper.next_id = odom.tick * SUBMAP_IDS_PER_EPOCH
@@ -217,7 +243,8 @@ class AgentCore:
         self._ensure_grid(pose_world)
         if frame is not None:
             deltas += self._integrate(frame, cam, points_base, T_loc_base, T_world_base, odom.tick)
-        if odom.tick % self.config.submap_every_ticks == 0:
+        periodic = odom.tick % self.config.submap_every_ticks == 0
+        if periodic and not self.deferred:
             delta = self.mapper.take_delta()
             deltas += [delta] if delta is not None else []
         events = self._navigate_goal_inputs(pose_world, odom.tick)
@@ -237,12 +264,15 @@ class AgentCore:
         events += [event] if event is not None else []
         self._adopt_queued(events)
         walls, odometry = self.localizer.walls, self.localizer.odometry
-        return self.outbox.messages(TickResult(
+        result = TickResult(
             tick=odom.tick, stamp_ns=odom.stamp_ns, pose_world=pose_world, state=self.nav.state,
             wall_direction_rad=walls.shared(xyyaw_from_T(self.T_world_loc)[2])
             if walls is not None else None,
             odometry_stats=odometry.calibration.shared() if odometry is not None else None,
-            deltas=deltas, events=events, cmd=cmd), self.T_world_loc, self.epoch or 0)
+            deltas=deltas, events=events, cmd=cmd)
+        self.late = ((odom.tick, odom.stamp_ns, self.T_world_loc.copy(), self.epoch or 0)
+                     if periodic and self.deferred else None)
+        return self.outbox.messages(result, self.T_world_loc, self.epoch or 0)
 
     def _hold_hidden_turn(self, cmd: Command) -> Command:
         """No command while a turn in place (and, with `hidden_hold_driving`, any motion)
@@ -301,28 +331,13 @@ class AgentCore:
         return events
 
     # -- perception --------------------------------------------------------------------------
-    def _teammates_in_view(self, pose_world: tuple[float, float, float], frame: RgbdFrame,
-                           tick: int) -> np.ndarray:
-        """(N, 2) world xy of fresh teammate estimates that mutual awareness puts in view."""
-        cfg = self.config
-        fresh = [predict_xy(p, self.teammates_prev.get(rid), tick, cfg.predict_max_ticks)
-                 for rid, p in sorted(self.teammates.items())
-                 if tick - p.tick <= cfg.teammate_max_age_ticks]
-        if not fresh:
-            return np.empty((0, 2))
-        xy = np.array(fresh)
-        test = visible_paper if cfg.awareness == "paper" else in_view_partial
-        seen = test(pose_world, xy, radius_m=cfg.robot_size_m,
-                    fov_rad=hfov_of(frame.K, frame.depth_m.shape[1]),
-                    range_m=frame.range_max_m, c=cfg.drf_c)
-        return xy[seen]
-
     def _filtered_points(self, frame: RgbdFrame, T_loc_base: np.ndarray, tick: int):
         """Camera points of the frame after the DRF, and the same points in the base frame."""
         depth = frame.depth_m
         if self.config.drf:
             pose_world = xyyaw_from_T(self._T_world_front() @ T_loc_base)  # pre-registration
-            targets = self._teammates_in_view(pose_world, frame, tick)
+            targets = teammates_in_view(self.teammates, self.teammates_prev, pose_world,
+                                        frame, tick, self.config)
             mask = np.zeros(depth.shape, bool)
             if targets.shape[0]:
                 mask = filter_mask(depth, frame.K, frame.T_base_cam, pose_world, targets,
@@ -408,11 +423,17 @@ class AgentCore:
         assert self.mapper.current is not None
         T_submap_base = invert(self.mapper.current.T_odom_submap) @ T_loc_base
         sure = self._surely_placed(points_base)
-        self.mapper.integrate(
-            transform_points(T_submap_base, points_base[sure]),
-            pixel_colors(frame.rgb, cam)[sure],
-            transform_xy(T_submap_base, free_base),
-        )
+        mapper = self.mapper
+
+        def add_voxels() -> None:
+            mapper.integrate(transform_points(T_submap_base, points_base[sure]),
+                             pixel_colors(frame.rgb, cam)[sure],
+                             transform_xy(T_submap_base, free_base))
+
+        if self.defer:
+            self.deferred.append(add_voxels)
+        else:
+            add_voxels()
         band = ~floor & (points_base[:, 2] <= cfg.obstacle_z_max_m)
         assert self.grid is not None
         occupied_world = transform_xy(T_world_base, points_base[band, :2])

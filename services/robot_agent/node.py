@@ -61,11 +61,19 @@ def due_at(msg: Message, edge_lag: int) -> int:
     return msg.tick + lag + 1  # type: ignore[attr-defined]
 
 
+def defers(tick: int, edge_every_ticks: int | None) -> bool:
+    """Whether tick k's late work (AgentCore.finish_tick) may follow CmdVel(k) out: not
+    when k + 1 is an edge tick, whose Clock the simulator sends as soon as it has every
+    CmdVel(k), so a Submap delta stamped k would race it to the edge (None: never)."""
+    return edge_every_ticks is not None and (tick + 1) % edge_every_ticks != 0
+
+
 def handle(
     bus: Bus, core: AgentCore, item: Inbound | Presence, tick_s: float, pending: list[Message],
-    edge_lag: int = 0,
+    edge_lag: int = 0, edge_every_ticks: int | None = None,
 ) -> None:
-    """Feed one inbound item to the core; on Odometry(k), publish the tick's outputs."""
+    """Feed one inbound item to the core; on Odometry(k), publish the tick's outputs
+    (with `edge_every_ticks`, the work CmdVel(k) does not need after it: `defers`)."""
     if isinstance(item, Presence):
         if item.role == "edge":
             core.on_edge_presence(item.alive)
@@ -80,7 +88,10 @@ def handle(
         pending[:] = [m for m in pending if due_at(m, edge_lag) > msg.tick]
         for earlier in due:
             _apply(core, earlier)
-        for out in core.on_odometry(msg):  # CmdVel(k) is last
+        outs = core.on_odometry(msg, defer=defers(msg.tick, edge_every_ticks))
+        for out in outs:  # CmdVel(k) is last
+            bus.publish(_out_key(bus, core.robot_id, out.topic), out.message)
+        for out in core.finish_tick():  # what CmdVel(k) did not need, while the sim steps on
             bus.publish(_out_key(bus, core.robot_id, out.topic), out.message)
         if msg.tick and msg.tick % REPORT_EVERY_TICKS == 0:
             sim_s = msg.tick * tick_s
@@ -140,7 +151,7 @@ def main(config: SpacemapConfig, robot_id: int) -> None:
             if item is not None:
                 with lock:
                     handle(bus, core, item, config.sim.tick_s, pending,
-                           config.sim.edge_lag_ticks)
+                           config.sim.edge_lag_ticks, config.sim.edge_every_ticks)
                 if isinstance(item, Inbound) and isinstance(item.message, Odometry):
                     last_tick[0] = item.message.tick
     log.info("agent %d stopped", robot_id)

@@ -114,6 +114,10 @@ class FrameRegistrar:
         self.params = params
         self.T_odom_accepted: np.ndarray | None = None  # odometry at the last accepted one
         self.n_accepted = 0
+        # frames inserted while this is on wait in `pending` until `flush` (or the next
+        # alignment): the map only matters to the next frame, so the agent adds them after
+        # its tick's command is out (AgentCore.finish_tick)
+        self.defer_inserts = False
         self.reset()
 
     def reset(self) -> None:
@@ -125,6 +129,7 @@ class FrameRegistrar:
                        if p.coarse_voxel_m > 0 else None)
         self.n_inserted = 0
         self.T_inserted: np.ndarray | None = None  # pose of the last frame inserted
+        self.pending: list[tuple[small_gicp.PointCloud, np.ndarray]] = []  # dropped with the map
 
     def _cloud(self, points_base: np.ndarray) -> small_gicp.PointCloud | None:
         out = self.cloud_tree(points_base)
@@ -179,6 +184,7 @@ class FrameRegistrar:
         """(planar T_loc_base, GICP Hessian, inlier fraction) of one frame against the map,
         or why not."""
         p = self.params
+        self.flush()
         res = self._gicp(self.voxelmap, cloud, guess)
         if self.coarse is not None and (
                 not res.converged or res.num_inliers < p.coarse_below_frac * cloud.size()):
@@ -204,9 +210,17 @@ class FrameRegistrar:
                                 num_threads=1, max_iterations=p.max_iterations)
 
     def _insert_maps(self, cloud: small_gicp.PointCloud, T_loc_base: np.ndarray) -> None:
-        self.voxelmap.insert(cloud, T_loc_base)
-        if self.coarse is not None:
-            self.coarse.insert(cloud, T_loc_base)
+        self.pending.append((cloud, T_loc_base))
+        if not self.defer_inserts:
+            self.flush()
+
+    def flush(self) -> None:
+        """Insert the frames still pending, in the order they came."""
+        pending, self.pending = self.pending, []
+        for cloud, T_loc_base in pending:
+            self.voxelmap.insert(cloud, T_loc_base)
+            if self.coarse is not None:
+                self.coarse.insert(cloud, T_loc_base)
 
     def insert(self, cloud: small_gicp.PointCloud, T_loc_base: np.ndarray) -> None:
         self._insert_maps(cloud, T_loc_base)
@@ -224,6 +238,7 @@ class FrameRegistrar:
     def _align(self, cloud: small_gicp.PointCloud, guess: np.ndarray,
                gate: tuple[float, float]) -> RegistrationOutcome:
         p = self.params
+        self.flush()
         res = small_gicp.align(
             self.voxelmap, cloud, guess, max_correspondence_distance=p.max_corr_m,
             num_threads=1, max_iterations=p.max_iterations,

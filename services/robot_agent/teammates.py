@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from schemas.messages import RobotPose
+from schemas.messages import RgbdFrame, RobotPose
+from services.robot_agent.awareness import in_view_partial, visible_paper
+from services.robot_agent.config import AgentConfig
+from services.robot_agent.projection import hfov_of
 
 
 def predict_xy(last: RobotPose, prev: RobotPose | None, tick: int, max_ticks: int) -> np.ndarray:
@@ -26,3 +29,21 @@ def teammates_xy(teammates: dict[int, RobotPose]) -> np.ndarray:
     """(N, 2) the teammates' last estimated xy, world frame."""
     return np.array([[p.pose_world.x, p.pose_world.y] for p in teammates.values()],
                     np.float64).reshape(-1, 2)
+
+
+def teammates_in_view(
+    teammates: dict[int, RobotPose], teammates_prev: dict[int, RobotPose],
+    pose_world: tuple[float, float, float], frame: RgbdFrame, tick: int, cfg: AgentConfig,
+) -> np.ndarray:
+    """(N, 2) world xy of fresh teammate estimates that mutual awareness puts in view."""
+    fresh = [predict_xy(p, teammates_prev.get(rid), tick, cfg.predict_max_ticks)
+             for rid, p in sorted(teammates.items())
+             if tick - p.tick <= cfg.teammate_max_age_ticks]
+    if not fresh:
+        return np.empty((0, 2))
+    xy = np.array(fresh)
+    test = visible_paper if cfg.awareness == "paper" else in_view_partial
+    seen = test(pose_world, xy, radius_m=cfg.robot_size_m,
+                fov_rad=hfov_of(frame.K, frame.depth_m.shape[1]),
+                range_m=frame.range_max_m, c=cfg.drf_c)
+    return xy[seen]
