@@ -20,6 +20,9 @@ def eval_(
     plots: Annotated[bool, typer.Option("--plots", help="also redraw the PNG figures")] = False,
     explain: Annotated[bool, typer.Option(
         "--explain", help="only print where each robot's time and distance went")] = False,
+    from_coverage: Annotated[float | None, typer.Option(
+        "--from-coverage", min=0.0, max=100.0, help="with --explain: only the mission after "
+        "the 3D coverage first reached this many % (where the tail's time goes)")] = None,
     log_level: LogOpt = "WARNING",
 ) -> None:
     """Recompute metrics.json from a finished run folder's files and compare."""
@@ -33,10 +36,12 @@ def eval_(
     setup_logging(log_level)
     if not (run_dir / "config.yaml").exists():
         raise typer.BadParameter(f"{run_dir} has no config.yaml: not a run folder")
+    if from_coverage is not None and not explain:
+        raise typer.BadParameter("--from-coverage goes with --explain")
     if explain:
         try:
-            typer.echo(explain_run_folder(run_dir), nl=False)
-        except FileNotFoundError as exc:
+            typer.echo(explain_run_folder(run_dir, from_coverage), nl=False)
+        except (FileNotFoundError, ValueError) as exc:
             raise typer.BadParameter(str(exc)) from exc
         return
     metrics = evaluate_run_folder(run_dir)

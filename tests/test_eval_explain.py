@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from services.evaluator.explain import (
+    coverage_tick,
     explain_robot,
     goal_spans,
     markdown,
@@ -86,6 +87,38 @@ def test_time_and_distance_split_by_outcome() -> None:
     assert out.state_time_s == pytest.approx({"following": 10.0, "idle": 5.0, "turning": 15.0})
     table = markdown({0: out})
     assert "10 / 10.0" in table and "reached 1, invalid 1" in table
+
+
+def test_a_window_counts_only_what_lies_after_its_start() -> None:
+    stamps = np.arange(0, 301) * TICK_S  # 1 m/s along x for 30 s
+    xy = np.stack([stamps, np.zeros_like(stamps)], axis=1)
+    events = [_goal(0, 0), _status(100, 0, "reached"), _goal(110, 1), _status(140, 1, "invalid"),
+              _goal(150, 2, "weak"), _status(200, 2, "invalid"),
+              {"tick": 0, "kind": "state", "state": "following"},
+              {"tick": 100, "kind": "state", "state": "idle"},
+              {"tick": 150, "kind": "state", "state": "turning"}]
+    out = explain_robot(events, stamps, xy, end_tick=300, tick_s=TICK_S, start_tick=120)
+    # goal 0 ended before the window; goal 1 reaches into it: its last 2 s count
+    assert out.goals == {"invalid": 2}
+    assert out.time_s["invalid"] == pytest.approx(2.0 + 5.0)
+    assert out.time_s["no goal"] == pytest.approx(18.0 - 7.0)
+    assert out.total_time_s == pytest.approx(18.0)
+    assert out.total_distance_m == pytest.approx(18.0)
+    assert out.distance_m["invalid"] == pytest.approx(7.0)
+    assert out.class_time_s == pytest.approx({"unexplored": 2.0, "weak": 5.0})
+    assert out.state_time_s == pytest.approx({"idle": 3.0, "turning": 15.0})
+    whole = explain_robot(events, stamps, xy, end_tick=300, tick_s=TICK_S)
+    assert whole.goals == {"reached": 1, "invalid": 2} and whole.total_time_s == 30.0
+
+
+def test_coverage_tick_is_the_first_sample_at_the_level() -> None:
+    series = [{"sim_time_s": 5.0, "coverage_3d_pct": 40.0},
+              {"sim_time_s": 10.0, "coverage_3d_pct": None},
+              {"sim_time_s": 15.0, "coverage_3d_pct": 95.5},
+              {"sim_time_s": 20.0, "coverage_3d_pct": 94.0}]
+    assert coverage_tick(series, 95.0, TICK_S) == 150
+    assert coverage_tick(series, 40.0, TICK_S) == 50
+    assert coverage_tick(series, 96.0, TICK_S) is None
 
 
 def test_state_times_end_at_the_mission_end() -> None:

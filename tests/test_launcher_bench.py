@@ -80,6 +80,16 @@ def test_eval_recomputes_run_metrics(bench_dir: Path) -> None:
     assert explained.exit_code == 0, explained.output
     rows = [line for line in explained.output.splitlines() if line.startswith("| 1 |")]
     assert "| robot | reached | invalid |" in explained.output and len(rows) == 2
+    # the tail's window: from the first sample at the series' own first coverage
+    first = rf.read_csv(run / "timeseries.csv")[0]
+    tail = CliRunner().invoke(app, ["eval", str(run), "--explain", "--from-coverage",
+                                    str(float(first["coverage_3d_pct"]))])
+    assert tail.exit_code == 0, tail.output
+    assert f"first sampled at {float(first['sim_time_s']):.1f} s" in tail.output
+    never = CliRunner().invoke(app, ["eval", str(run), "--explain", "--from-coverage", "100"])
+    assert never.exit_code != 0 and "never reached 100" in never.output
+    alone = CliRunner().invoke(app, ["eval", str(run), "--from-coverage", "50"])
+    assert alone.exit_code != 0 and "goes with --explain" in alone.output
 
 
 def test_eval_notices_a_changed_map(bench_dir: Path) -> None:

@@ -115,19 +115,37 @@ def redraw_plots(run_dir: Path, metrics: dict[str, Any]) -> None:
                  np.asarray(frontiers, dtype=np.float64), run_dir / "map_top.png", label)
 
 
-def explain_run_folder(run_dir: Path) -> str:
-    """`spacemap eval --explain`: where each robot's time and distance went (markdown)."""
-    from services.evaluator.explain import explain_events, markdown, revisits, turned_away
+def explain_run_folder(run_dir: Path, from_coverage_pct: float | None = None) -> str:
+    """`spacemap eval --explain`: where each robot's time and distance went (markdown);
+    with `from_coverage_pct`, only after the 3D coverage first reached it (ValueError: the
+    run never did)."""
+    from services.evaluator.explain import (
+        coverage_tick,
+        explain_events,
+        markdown,
+        revisits,
+        turned_away,
+    )
 
     path = run_dir / rf.EVENTS
     if not path.exists():
         raise FileNotFoundError(f"{path} missing: the run predates events.jsonl")
     config = RunConfig.read(run_dir / "config.yaml")
     live = rf.read_json(run_dir / rf.LIVE)
-    end_tick = round(float(live["sim_time_s"]) / config.sim.tick_s)
+    tick_s = config.sim.tick_s
+    end_tick = round(float(live["sim_time_s"]) / tick_s)
     tracks = load_tracks(run_dir, config.sim.robots)
     events = rf.read_events(path)
-    per_robot = explain_events(events, tracks, end_tick, config.sim.tick_s)
+    if from_coverage_pct is not None:
+        start = coverage_tick(rf.read_csv(run_dir / rf.TIMESERIES), from_coverage_pct, tick_s)
+        if start is None:
+            raise ValueError(f"{run_dir}: 3D coverage never reached {from_coverage_pct} % in "
+                             f"{rf.TIMESERIES}")
+        start = min(start, end_tick)
+        head = (f"From 3D coverage {from_coverage_pct:g} % (first sampled at "
+                f"{start * tick_s:.1f} s) to the end ({end_tick * tick_s:.1f} s)\n\n")
+        return head + markdown(explain_events(events, tracks, end_tick, tick_s, start))
+    per_robot = explain_events(events, tracks, end_tick, tick_s)
     again, reached = revisits(events)
     given, away = turned_away(events)
     return markdown(per_robot) + (

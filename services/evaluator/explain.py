@@ -16,6 +16,11 @@ is `no goal`. States (`idle` = spinning with no goal, `turning`, `following`) ar
 from their changes; `stalled` is the part of `following` in which the true position moved
 less than 1 cm over the last second (pushing at what the camera missed, or yielding to a
 teammate: docs/agent.md, "Blocked by what the camera misses").
+
+With a window start (`start_tick`), every figure covers only the ticks from there to the end:
+spans, states and distances are clipped to it, and a goal counts when its span reaches into
+it (`spacemap eval --explain --from-coverage P`: the mission after the 3D coverage first
+reached P %, where the tail's time goes).
 """
 
 from __future__ import annotations
@@ -105,21 +110,25 @@ def path_length(stamps_s: np.ndarray, xy: np.ndarray, t0: float, t1: float) -> f
     return float(seg[inside].sum())
 
 
-def state_times(events: Sequence[dict[str, Any]], end_tick: int, tick_s: float
-                ) -> dict[str, float]:
-    """Seconds in each navigation state, from the state changes."""
+def state_times(events: Sequence[dict[str, Any]], end_tick: int, tick_s: float,
+                start_tick: int = 0) -> dict[str, float]:
+    """Seconds in each navigation state from `start_tick` to `end_tick`, from the state
+    changes."""
     out: Counter[str] = Counter()
     changes = [(int(e["tick"]), str(e["state"])) for e in events if e["kind"] == "state"]
     for (tick, state), (next_tick, _) in zip(changes, changes[1:] + [(end_tick, "")],
                                              strict=True):
-        out[state or "unknown"] += max(next_tick - tick, 0) * tick_s
+        ticks = min(next_tick, end_tick) - max(tick, start_tick)
+        if start_tick == 0 or next_tick > start_tick:  # wholly before the window: not listed
+            out[state or "unknown"] += max(ticks, 0) * tick_s
     return dict(out)
 
 
 def stalled_time(events: Sequence[dict[str, Any]], stamps_s: np.ndarray, xy: np.ndarray,
-                 tick_s: float, window_s: float = 1.0, min_move_m: float = 0.01) -> float:
-    """Seconds of the true path's samples in state "following" whose position is within
-    `min_move_m` of where it was `window_s` earlier."""
+                 tick_s: float, window_s: float = 1.0, min_move_m: float = 0.01,
+                 start_s: float = -np.inf) -> float:
+    """Seconds of the true path's samples (after `start_s`) in state "following" whose
+    position is within `min_move_m` of where it was `window_s` earlier."""
     changes = [(int(e["tick"]) * tick_s, str(e["state"])) for e in events
                if e["kind"] == "state"]
     if len(xy) < 2 or not changes:
@@ -132,20 +141,26 @@ def stalled_time(events: Sequence[dict[str, Any]], stamps_s: np.ndarray, xy: np.
     still = (stamps_s - stamps_s[back] >= window_s - 1e-6) & (
         np.hypot(*(xy - xy[back]).T) < min_move_m)
     step = float(np.median(np.diff(stamps_s)))
-    return float(np.count_nonzero(now_following & still) * step)
+    return float(np.count_nonzero(now_following & still & (stamps_s > start_s)) * step)
 
 
 def explain_robot(events: Sequence[dict[str, Any]], stamps_s: np.ndarray, xy: np.ndarray,
-                  end_tick: int, tick_s: float) -> RobotExplain:
-    """One robot's breakdown; `stamps_s`, `xy` its true path (N,), (N, 2)."""
-    out = RobotExplain(state_time_s=state_times(events, end_tick, tick_s),
-                       stalled_s=stalled_time(events, stamps_s, xy, tick_s))
-    out.total_time_s = end_tick * tick_s
-    out.total_distance_m = path_length(stamps_s, xy, -1.0, end_tick * tick_s)
+                  end_tick: int, tick_s: float, start_tick: int = 0) -> RobotExplain:
+    """One robot's breakdown from `start_tick` to `end_tick`; `stamps_s`, `xy` its true path
+    (N,), (N, 2)."""
+    start_s = start_tick * tick_s
+    out = RobotExplain(state_time_s=state_times(events, end_tick, tick_s, start_tick),
+                       stalled_s=stalled_time(events, stamps_s, xy, tick_s,
+                                              start_s=start_s if start_tick else -np.inf))
+    out.total_time_s = (end_tick - start_tick) * tick_s
+    out.total_distance_m = path_length(stamps_s, xy, start_s if start_tick else -1.0,
+                                       end_tick * tick_s)
     time, dist, cls = Counter(), Counter(), Counter()
     covered = 0.0
     for span in goal_spans(events, end_tick):
-        t0, t1 = span.start_tick * tick_s, span.end_tick * tick_s
+        t0, t1 = max(span.start_tick, start_tick) * tick_s, span.end_tick * tick_s
+        if span.end_tick <= start_tick:
+            continue
         out.goals[span.outcome] += 1
         time[span.outcome] += t1 - t0
         dist[span.outcome] += path_length(stamps_s, xy, t0, t1)
@@ -217,8 +232,18 @@ def turned_away(events: Sequence[dict[str, Any]], min_m: float = 1.0, radius_m: 
 
 def explain_events(events: Sequence[dict[str, Any]],
                    tracks: Sequence[tuple[np.ndarray, np.ndarray]], end_tick: int,
-                   tick_s: float) -> dict[int, RobotExplain]:
+                   tick_s: float, start_tick: int = 0) -> dict[int, RobotExplain]:
     """Every robot's breakdown from a run's events (each with a "robot") and true paths."""
     return {robot: explain_robot([e for e in events if e.get("robot") == robot], stamps, xy,
-                                 end_tick, tick_s)
+                                 end_tick, tick_s, start_tick)
             for robot, (stamps, xy) in enumerate(tracks)}
+
+
+def coverage_tick(series: Sequence[dict[str, Any]], pct: float, tick_s: float) -> int | None:
+    """The tick of the first time-series sample whose 3D coverage is at least `pct` (None:
+    never reached)."""
+    for row in series:
+        value = row.get("coverage_3d_pct")
+        if value is not None and float(value) >= pct:
+            return round(float(row["sim_time_s"]) / tick_s)
+    return None
