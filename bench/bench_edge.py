@@ -26,7 +26,8 @@ from services.common.geometry import T_from_xyyaw, invert, transform_points
 from services.common.planning import inflate
 from services.edge_server.config import EdgeConfig
 from services.edge_server.frontiers import detect_frontiers
-from services.edge_server.planner import EdgePlanner, robot_fields
+from services.edge_server.planner import EdgePlanner
+from services.edge_server.robot_fields import all_fields as robot_fields
 from services.edge_server.spatial_frontiers import detect_spatial_frontiers
 
 V = 0.05

@@ -39,6 +39,7 @@ from schemas.messages import GoalStatus, Message, RobotPose, Submap  # noqa: E40
 from services.common.heap import keep_freed_memory  # noqa: E402
 from services.config import load_config  # noqa: E402
 from services.edge_server import planner as planner_mod  # noqa: E402
+from services.edge_server.node import merges_for  # noqa: E402
 from services.edge_server.planner import EdgePlanner  # noqa: E402
 
 INPUTS: dict[str, type[Message]] = {"submap": Submap, "pose": RobotPose,
@@ -61,7 +62,9 @@ def edge_inputs(keys: Keys, path: Path) -> Iterator[tuple[str, str, bytes]]:
 
 def instrument(planner: EdgePlanner, timer: StageTimer) -> None:
     """Time the plan's stages on this planner instance (and the module functions it calls)."""
-    if planner.config.merge:
+    if planner.config.merge and planner.merges.concurrent:  # a worker process: its wait
+        planner.merges.finish = timer.wrap("merger update (waited for)", planner.merges.finish)
+    elif planner.config.merge:
         planner.merger.update = timer.wrap("merger update", planner.merger.update)
     planner.merged.update = timer.wrap("merged map update", planner.merged.update)
     planner.grid.update = timer.wrap("merged grid update", planner.grid.update)
@@ -81,7 +84,7 @@ def replay(rec: Path, limit: int | None, overrides: dict[str, str] | None = None
     `prof` runs from plan `profile_after` on (a large mission's late plans cost the most)."""
     config = load_config(rec / "run" / "config.yaml", overrides or {})
     keys = Keys(config.bus.prefix)
-    planner = EdgePlanner(config.edge, config.sim.tick_s)
+    planner = EdgePlanner(config.edge, config.sim.tick_s, merges_for(config.edge))
     for robot in range(config.sim.robots):
         planner.on_agent(robot, True)
     timer = StageTimer()
@@ -97,6 +100,7 @@ def replay(rec: Path, limit: int | None, overrides: dict[str, str] | None = None
     last = max((m.tick for m in inbox), default=0)  # type: ignore[attr-defined]
     produced: dict[str, list[bytes]] = {"goal": [], "grid": []}
     plan_s: list[float] = []
+    wall_s: list[float] = []
     fed = 0
     ordered = sorted(range(len(inbox)), key=lambda i: inbox[i].tick)  # type: ignore[attr-defined]
     for k in range(0, last + 1, every):
@@ -108,15 +112,19 @@ def replay(rec: Path, limit: int | None, overrides: dict[str, str] | None = None
         if not planner.plan_due(k // every):  # edge.plan_every_edge_ticks, as node.py
             planner.skip()
             continue
-        t0 = time.process_time()
+        t0, w0 = time.process_time(), time.perf_counter()
         out = planner.plan(k)
         plan_s.append(time.process_time() - t0)
+        wall_s.append(time.perf_counter() - w0)
         timer.close_tick()
         produced["goal"] += [encode(g) for g in out.goals]
         if out.grid is not None:
             produced["grid"].append(encode(out.grid))
         if limit is not None and len(plan_s) >= limit:
             break
+    planner.close()
+    print(f"plans' wall time {sum(wall_s):.2f} s, median {1e3 * statistics.median(wall_s):.1f} ms "
+          f"(a merger worker's CPU is not in the CPU figures below)")
     partial = limit is not None
     mismatches = {t: _mismatch(expected[t], produced[t], partial) for t in expected}
     return timer, plan_s, mismatches, planner

@@ -107,11 +107,25 @@ class ProcessGroup:
 
 
 def process_cpu_seconds(pid: int) -> float | None:
-    """User + system CPU seconds of a running process (Linux /proc), None if it is gone."""
+    """User + system CPU seconds of a running process and its live descendants (Linux
+    /proc; the edge's merger worker is its child), None if the process is gone."""
     try:
         stat = Path(f"/proc/{pid}/stat").read_text()
     except OSError:
         return None
     fields = stat[stat.rindex(")") + 2:].split()  # the name in () may contain spaces
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime
+    own = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime
+    return own + sum(process_cpu_seconds(child) or 0.0 for child in _children(pid))
+
+
+def _children(pid: int) -> list[int]:
+    """Pids of a process's live children (every thread's list: a child belongs to the
+    thread that started it)."""
+    out: list[int] = []
+    for path in Path(f"/proc/{pid}/task").glob("*/children"):
+        try:
+            out += [int(c) for c in path.read_text().split()]
+        except OSError:
+            continue
+    return out
 

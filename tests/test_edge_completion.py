@@ -13,7 +13,8 @@ from services.edge_server.completion import CompletionJudge, VisitLog
 from services.edge_server.config import EdgeConfig
 from services.edge_server.frontiers import FrontierSet, frontier_set
 from services.edge_server.goals import GoalBook
-from services.edge_server.planner import EdgePlanner, robot_fields
+from services.edge_server.planner import EdgePlanner
+from services.edge_server.robot_fields import all_fields as robot_fields
 from tests.test_edge_map import make_submap, voxel_centres
 
 

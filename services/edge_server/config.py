@@ -209,6 +209,9 @@ class EdgeConfig(BaseModel):
                         "(with its registration gates and precheck it lowers the ATE in every "
                         "world and the warehouse's ghosts at 300 s, for 2-3x the edge's CPU; "
                         "docs/edge.md)")
+    merge_worker: bool = Field(
+        default=True, description="the edge server runs the merger's update in a worker "
+        "process beside the rest of its plan (merge_runner.py; the same results)")
     max_registrations: int = Field(default=2, ge=0, description="pair registrations per plan")
     merge_registrations_per_robot: float = Field(
         default=0.34, ge=0, description="... or this many per robot with submaps, where that "

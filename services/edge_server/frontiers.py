@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from schemas.messages import Frontier, Frontiers
 from services.common.grid import GridSpec
 from services.edge_server.config import EdgeConfig
 
@@ -198,3 +199,22 @@ def frontier_length_near(free: np.ndarray, known: np.ndarray, cells_rc: np.ndarr
                                   mode="constant")
     return near[cells_rc[:, 0], cells_rc[:, 1]].astype(np.float64) * (2 * k + 1) ** 2 \
         * spec.resolution_m
+
+
+def frontiers_message(tick: int, fs: FrontierSet, complete: bool, assigned: dict[int, int],
+                      resolution_m: float) -> Frontiers:
+    n = len(fs)
+    weak = fs.weak if fs.weak is not None else np.zeros(n, bool)
+    gain = fs.gain if fs.gain is not None else fs.sizes * resolution_m
+    imp = fs.importance if fs.importance is not None else np.ones(n)
+    z = fs.centroid_z if fs.centroid_z is not None else np.zeros(n)
+    items = [
+        Frontier(
+            frontier_id=i, frontier_class="weak" if weak[i] else "unexplored",
+            centroid=(float(fs.centroid_xy[i, 0]), float(fs.centroid_xy[i, 1]), float(z[i])),
+            goal_xy=(float(fs.goal_xy[i, 0]), float(fs.goal_xy[i, 1])),
+            size=int(fs.sizes[i]), gain=float(gain[i]), importance=float(imp[i]),
+        )
+        for i in range(n)
+    ]
+    return Frontiers(tick=tick, frontiers=items, complete=complete, assigned=assigned)

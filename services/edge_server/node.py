@@ -14,6 +14,7 @@ import logging
 import statistics
 import threading
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -36,7 +37,11 @@ from services.common.heap import keep_freed_memory
 from services.common.inventory import inventory_of
 from services.common.signals import stop_on_signals
 from services.config import SpacemapConfig
+from services.edge_server.config import EdgeConfig
 from services.edge_server.planner import EdgePlanner, PlanOutput
+
+if TYPE_CHECKING:
+    from services.edge_server.merge_runner import Merges
 
 log = logging.getLogger(__name__)
 
@@ -91,7 +96,7 @@ class EdgeNode:
         edge = config.edge
         if "seed" not in edge.model_fields_set:
             edge = edge.model_copy(update={"seed": config.sim.seed})  # the mission seed
-        self.planner = EdgePlanner(edge, config.sim.tick_s)
+        self.planner = EdgePlanner(edge, config.sim.tick_s, merges_for(edge))
         self.lock = threading.Lock()
         self.last_tick = 0
         self.plans = 0
@@ -185,6 +190,16 @@ class EdgeNode:
             self.bus.publish(k.correction(corr.robot_id), corr)
 
 
+def merges_for(edge: EdgeConfig) -> Merges | None:
+    """A worker process for the merger's updates when the config asks for one."""
+    if not (edge.merge and edge.merge_worker):
+        return None
+    from services.edge_server.merge_runner import WorkerMerges
+    from services.edge_server.merger import merger_params
+
+    return WorkerMerges(edge.voxel_m, merger_params(edge))
+
+
 def main(config: SpacemapConfig) -> None:
     """Run the edge server until SIGTERM or SIGINT."""
     keep_freed_memory()  # a plan frees and allocates arrays of hundreds of MB
@@ -211,5 +226,6 @@ def main(config: SpacemapConfig) -> None:
     log.info("edge stopped (submap seq gaps: %s; %d map/cloud queries held the lock %.2f s)",
              dict(node.planner.store.seq_gaps), node.cloud_queries, node.cloud_lock_s)
     if config.edge.merge:
-        log.info("merger: %s", node.planner.merger.report_step_summary())
+        log.info("merger: %s", node.planner.merges.summary())
+    node.planner.close()
 

@@ -18,7 +18,6 @@ from scipy import ndimage
 
 from schemas.messages import (
     Correction,
-    Frontier,
     Frontiers,
     Goal,
     GoalStatus,
@@ -39,6 +38,7 @@ from services.edge_server.frontiers import (
     empty_frontiers,
     frontier_length_near,
     frontier_set,
+    frontiers_message,
     goal_transform,
 )
 from services.edge_server.frontiers3d import PointFrontiers
@@ -60,6 +60,7 @@ from services.edge_server.unseen_floor import FULL_ENTROPY, unseen_floor_regions
 from services.edge_server.visible_unknown import live_unknown, visible_unknown_m2
 
 if TYPE_CHECKING:
+    from services.edge_server.merge_runner import Merges
     from services.edge_server.merger import MapMerger
 
 
@@ -76,44 +77,19 @@ class PlanOutput:
     corrections: list[Correction] = field(default_factory=list)
 
 
-def robot_fields(
-    traversable: np.ndarray, starts_rc: dict[int, np.ndarray], snap_cells: float
-) -> dict[int, np.ndarray]:
-    """Every robot's path-length field (cells), computed now (tests, benchmarks)."""
-    fields = RobotFields(traversable, starts_rc, snap_cells)
-    fields.compute(fields.robots)
-    return {robot: fields[robot] for robot in fields.robots}
-
-
 SPACE_PLANNERS = ("space", "space-paper")
-
-def frontiers_message(tick: int, fs: FrontierSet, complete: bool, assigned: dict[int, int],
-                      resolution_m: float) -> Frontiers:
-    n = len(fs)
-    weak = fs.weak if fs.weak is not None else np.zeros(n, bool)
-    gain = fs.gain if fs.gain is not None else fs.sizes * resolution_m
-    imp = fs.importance if fs.importance is not None else np.ones(n)
-    z = fs.centroid_z if fs.centroid_z is not None else np.zeros(n)
-    items = [
-        Frontier(
-            frontier_id=i, frontier_class="weak" if weak[i] else "unexplored",
-            centroid=(float(fs.centroid_xy[i, 0]), float(fs.centroid_xy[i, 1]), float(z[i])),
-            goal_xy=(float(fs.goal_xy[i, 0]), float(fs.goal_xy[i, 1])),
-            size=int(fs.sizes[i]), gain=float(gain[i]), importance=float(imp[i]),
-        )
-        for i in range(n)
-    ]
-    return Frontiers(tick=tick, frontiers=items, complete=complete, assigned=assigned)
-
 
 class EdgePlanner:
     """State of the edge server and its planning update."""
 
-    def __init__(self, config: EdgeConfig, tick_s: float) -> None:
+    def __init__(self, config: EdgeConfig, tick_s: float, merges: Merges | None = None
+                 ) -> None:
+        """`merges`: where the merger's update runs (merge_runner.py; None: in this thread,
+        made on first use)."""
         self.config = config
         self.tick_s = tick_s
         self.store = SubmapStore(config.voxel_m)
-        self._merger: MapMerger | None = None
+        self._merges = merges
         self.merged = MergedMap(config.voxel_m)
         self.grid = MergedGrid(config)
         self.book = GoalBook(config)
@@ -142,6 +118,8 @@ class EdgePlanner:
     # -- inputs ----------------------------------------------------------------------------
     def on_submap(self, msg: Submap) -> None:
         self.store.apply(msg)
+        if self._merges is not None:
+            self._merges.submap(msg)
 
     def on_pose(self, msg: RobotPose) -> None:
         self.poses[msg.robot_id] = msg.pose_world
@@ -179,33 +157,46 @@ class EdgePlanner:
         return sorted(r for r in self.poses if r not in self.dead)
 
     @property
-    def merger(self) -> MapMerger:
-        """The pose-graph merger, made on first use: it alone needs gtsam, whose import costs
-        the edge 0.3 s of CPU at every start when `merge` is off."""
-        if self._merger is None:
-            from services.edge_server.merger import MapMerger, merger_params
+    def merges(self) -> Merges:
+        """Where the merger's update runs, made on first use: the merger alone needs gtsam,
+        whose import costs the edge 0.3 s of CPU at every start when `merge` is off."""
+        if self._merges is None:
+            from services.edge_server.merge_runner import LocalMerges
+            from services.edge_server.merger import merger_params
 
-            self._merger = MapMerger(self.config.voxel_m, merger_params(self.config))
-        return self._merger
+            self._merges = LocalMerges(self.config.voxel_m, merger_params(self.config))
+        return self._merges
+
+    @property
+    def merger(self) -> MapMerger:
+        """The pose-graph merger of an in-thread runner (the benches time and read it)."""
+        return self.merges.merger  # type: ignore[attr-defined]
+
+    def close(self) -> None:
+        """Release the merger's runner (its worker process, if any)."""
+        if self._merges is not None:
+            self._merges.close()
 
     def robot_grid(self, robot_id: int, tick: int) -> OccupancyGrid | None:
         """One robot's own grid on the merged grid's current bounds (map/robot_grid)."""
         return robot_grid(self.store, self.merged, self.grid, robot_id, tick)
 
     def _merge(self, tick: int) -> list[Correction]:
-        """Pose-graph update; corrected poses move the submaps and go back to the agents."""
+        """Pose-graph update; corrected poses move the submaps and go back to the agents.
+        A runner in another process updates while P* and Alg. 1's sums take the new data at
+        the poses as they are: the corrections then move submaps as on any plan, so P* ends
+        the same (its versions aside)."""
         if not self.config.merge:
             return []
-        changed = self.merger.update(self.store)
+        self.merges.start(self.store)
+        if self.merges.concurrent:
+            self.merged.update(self.store)
+            self._point_frontiers()
+        changed, estimates = self.merges.finish(self.store)
         for key in sorted(changed):
             self.store.set_pose(key, changed[key])
-        out = []
-        for robot in sorted({r for r, _ in changed}):
-            ids = sorted(s for r, s in self.merger.estimates if r == robot)
-            poses = np.stack([self.merger.estimates[(robot, s)] for s in ids])
-            out.append(Correction(robot_id=robot, tick=tick, submap_ids=np.array(ids, np.int32),
-                                  T_world_submap=poses))
-        return out
+        return [Correction(robot_id=robot, tick=tick, submap_ids=np.array(ids, np.int32),
+                           T_world_submap=poses) for robot, (ids, poses) in estimates.items()]
 
     def _point_frontiers(self) -> PointFrontiers | None:
         """Alg. 1 on P*, incrementally when P* is on the ϱ lattice (None: from scratch)."""

@@ -122,3 +122,12 @@ class InflationCache:
                 inflated[r0:r1, c0:c1] |= inflate(added[r0:r1, c0:c1], radius_cells)
         self._occupied, self._inflated, self._radius = occupied.copy(), inflated, radius_cells
         return inflated.copy()
+
+
+def all_fields(
+    traversable: np.ndarray, starts_rc: dict[int, np.ndarray], snap_cells: float
+) -> dict[int, np.ndarray]:
+    """Every robot's path-length field (cells), computed now (tests, benchmarks)."""
+    fields = RobotFields(traversable, starts_rc, snap_cells)
+    fields.compute(fields.robots)
+    return {robot: fields[robot] for robot in fields.robots}

@@ -1,0 +1,81 @@
+"""The merger's update in a worker process (merge_runner.py): the same poses, the same P*."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from schemas import encode
+from services.common.geometry import T_from_xyyaw
+from services.edge_server.config import EdgeConfig
+from services.edge_server.merge_runner import LocalMerges, WorkerMerges
+from services.edge_server.merger import MergerParams, merger_params
+from services.edge_server.node import merges_for
+from services.edge_server.planner import EdgePlanner
+from tests.test_edge_map import make_submap
+from tests.test_edge_merger import V, build_store
+
+
+def _messages() -> list:
+    """The submap messages of two robots touring one room, robot 1's drift adding up from
+    submap to submap (test_edge_merger: the default merger corrects it)."""
+    drift = T_from_xyyaw(0.03 * np.cos(0.5), 0.03 * np.sin(0.5), np.deg2rad(0.3))
+    store, _ = build_store(drift, growing=True)
+    return [make_submap(sm.robot_id, sm.submap_id, sm.submap_id, 10 * sm.submap_id + 1,
+                        sm.T_reported, sm.points.astype(np.float64))
+            for sm in sorted(store.ordered(), key=lambda s: (s.submap_id, s.robot_id))]
+
+
+def _planners(config: EdgeConfig) -> tuple[EdgePlanner, EdgePlanner]:
+    params = MergerParams()  # the merger's own defaults correct this scene's drift
+    return (EdgePlanner(config, 0.1, LocalMerges(config.voxel_m, params)),
+            EdgePlanner(config, 0.1, WorkerMerges(config.voxel_m, params)))
+
+
+def test_a_worker_plans_what_the_planner_would_in_its_own_thread() -> None:
+    config = EdgeConfig()
+    local, worker = _planners(config)
+    messages = _messages()
+    corrected = 0
+    try:
+        for plan in range(14):
+            for msg in messages[2 * plan: 2 * plan + 2]:  # two submaps between plans
+                local.on_submap(msg)
+                worker.on_submap(msg)
+            a, b = local.plan(10 * plan), worker.plan(10 * plan)
+            corrected += len(a.corrections)
+            assert [encode(c) for c in a.corrections] == [encode(c) for c in b.corrections]
+            for name in ("keys", "colors", "robot_ids", "points_world"):
+                assert np.array_equal(getattr(local.merged, name), getattr(worker.merged, name))
+            pa, pb = local._point_frontiers(), worker._point_frontiers()
+            assert np.array_equal(pa.rho, pb.rho) and np.array_equal(pa.var_m2, pb.var_m2)
+            for key, sm in local.store.submaps.items():
+                assert np.array_equal(sm.T_world_submap, worker.store.submaps[key].T_world_submap)
+        assert corrected > 0, "the scene must exercise corrections"
+        assert worker.merges.summary() == local.merges.summary()
+    finally:
+        worker.close()
+
+
+def test_the_node_starts_a_worker_only_when_merging_with_one() -> None:
+    assert merges_for(EdgeConfig(merge=False)) is None
+    assert merges_for(EdgeConfig(merge_worker=False)) is None
+    runner = merges_for(EdgeConfig())
+    assert isinstance(runner, WorkerMerges)
+    runner.close()
+    assert not runner._proc.is_alive()
+
+
+def test_a_failing_or_dead_worker_raises_in_the_plan() -> None:
+    config = EdgeConfig()
+    runner = WorkerMerges(V, merger_params(config))
+    try:
+        runner.submap("not a submap")  # the worker's store cannot apply it
+        with pytest.raises(RuntimeError, match="failed"):
+            runner.finish(EdgePlanner(config, 0.1).store)
+        runner._proc.kill()
+        runner._proc.join(5)
+        with pytest.raises(RuntimeError, match="died"):
+            runner.finish(EdgePlanner(config, 0.1).store)
+    finally:
+        runner.close()
