@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import signal
+
 import numpy as np
 import pytest
 
@@ -79,3 +82,20 @@ def test_a_failing_or_dead_worker_raises_in_the_plan() -> None:
             runner.finish(EdgePlanner(config, 0.1).store)
     finally:
         runner.close()
+
+
+def test_the_worker_outlives_signals_to_its_group_and_ends_with_the_edge() -> None:
+    """Ctrl-C reaches the whole process group: the edge shuts down and asks its worker for
+    the closing summary, so the worker must not die of the signal; it ends when the edge
+    closes it, or when the edge's end of the pipe closes."""
+    runner = WorkerMerges(V, MergerParams())
+    try:
+        assert runner.summary()  # up and answering
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            os.kill(runner._proc.pid, sig)
+        assert runner.summary()
+        runner._conn.close()  # as when the edge exits without closing it
+        runner._proc.join(10)
+        assert not runner._proc.is_alive()
+    finally:
+        runner._proc.kill()

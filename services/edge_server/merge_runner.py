@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import multiprocessing as mp
+import signal
 import traceback
 import weakref
 from multiprocessing.connection import Connection
@@ -156,6 +157,10 @@ def serve(conn: Connection, voxel_m: float, params: MergerParams) -> None:
     """The worker's loop: apply submaps, run updates (and the correction each implies on the
     replica, as the planner does on its store), until "close" or the pipe closes. One answer
     per request; a submap that failed to apply is reported by the next one."""
+    # Ctrl-C and a process group's SIGTERM reach the worker too: the edge decides when it
+    # ends (its pipe closes when the edge exits, however it exits)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     store = SubmapStore(voxel_m)
     merger = MapMerger(voxel_m, params)
     failed: str | None = None
