@@ -1,3 +1,4 @@
 from services.cli import app
 
-app(prog_name="spacemap")
+if __name__ == "__main__":  # importing it (as a tool or a spawned process may) starts nothing
+    app(prog_name="spacemap")
