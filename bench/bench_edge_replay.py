@@ -26,6 +26,7 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -60,10 +61,21 @@ def edge_inputs(keys: Keys, path: Path) -> Iterator[tuple[str, str, bytes]]:
                 yield topic, key, payload
 
 
-def instrument(planner: EdgePlanner, timer: StageTimer) -> None:
-    """Time the plan's stages on this planner instance (and the module functions it calls)."""
+def instrument(planner: EdgePlanner, timer: StageTimer) -> list[float]:
+    """Time the plan's stages on this planner instance (and the module functions it calls);
+    the list fills with each plan's wall time waiting for a merger's worker."""
+    waits: list[float] = []
     if planner.config.merge and planner.merges.concurrent:  # a worker process: its wait
-        planner.merges.finish = timer.wrap("merger update (waited for)", planner.merges.finish)
+        finish = timer.wrap("merger update (waited for)", planner.merges.finish)
+
+        def waited(*args: Any) -> Any:
+            t0 = time.perf_counter()
+            try:
+                return finish(*args)
+            finally:
+                waits.append(time.perf_counter() - t0)
+
+        planner.merges.finish = waited
     elif planner.config.merge:
         planner.merger.update = timer.wrap("merger update", planner.merger.update)
     planner.merged.update = timer.wrap("merged map update", planner.merged.update)
@@ -74,6 +86,7 @@ def instrument(planner: EdgePlanner, timer: StageTimer) -> None:
     for name, stage in (("RobotFields", "robot distance fields"),
                         ("detect_spatial_frontiers", "- 3D F_u/F_w regions")):
         setattr(planner_mod, name, timer.wrap(stage, getattr(planner_mod, name)))
+    return waits
 
 
 def replay(rec: Path, limit: int | None, overrides: dict[str, str] | None = None,
@@ -88,7 +101,7 @@ def replay(rec: Path, limit: int | None, overrides: dict[str, str] | None = None
     for robot in range(config.sim.robots):
         planner.on_agent(robot, True)
     timer = StageTimer()
-    instrument(planner, timer)
+    waits = instrument(planner, timer)
     every = config.sim.edge_every_ticks
     inbox: list[Message] = []
     expected: dict[str, list[bytes]] = {"goal": [], "grid": []}
@@ -125,6 +138,10 @@ def replay(rec: Path, limit: int | None, overrides: dict[str, str] | None = None
     planner.close()
     print(f"plans' wall time {sum(wall_s):.2f} s, median {1e3 * statistics.median(wall_s):.1f} ms "
           f"(a merger worker's CPU is not in the CPU figures below)")
+    if waits:
+        print(f"waited for the merger's worker {sum(waits):.2f} s over {len(waits)} plans, "
+              f"median {1e3 * statistics.median(waits):.1f} ms, over 5 ms in "
+              f"{sum(w > 0.005 for w in waits)}")
     partial = limit is not None
     mismatches = {t: _mismatch(expected[t], produced[t], partial) for t in expected}
     return timer, plan_s, mismatches, planner

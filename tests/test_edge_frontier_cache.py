@@ -113,3 +113,26 @@ def test_a_map_growing_one_way_reallocates_the_box_a_few_times_only() -> None:
     assert inc.stats.dims[0] >= 8 * 99 + 20
     assert reallocations <= 12
     _check(inc, keys)
+
+
+def test_the_compiled_read_is_the_numpy_read_bit_for_bit(monkeypatch) -> None:
+    """ρ and σ² of a large map in one compiled pass (compiled_stats.py): every array equal to
+    the numpy path's to the last bit, through growth and removal."""
+    from services.edge_server import frontier_cache
+
+    rng = np.random.default_rng(5)
+    dense = _cloud(rng, 6000)  # full balls: σ² at the stencil's own
+    sparse = np.unique(pack(rng.integers(-60, 60, size=(3000, 3))))  # lone voxels: ρ 1, σ² 0
+    steps = [np.union1d(dense, sparse)]
+    steps.append(np.union1d(steps[0], _cloud(rng, 2000, lo=18)))
+    steps.append(steps[1][rng.random(steps[1].size) < 0.8])
+    runs = []
+    for compiled_from in (10**12, 0):
+        monkeypatch.setattr(frontier_cache, "COMPILED_FROM", compiled_from)
+        inc = IncrementalFrontiers(V, R, DD, DV, z_max_m=0.6)
+        runs.append([inc.update(keys) for keys in steps])
+    for a, b in zip(*runs, strict=True):
+        assert a.weak.any() and a.unexplored.any() and (a.var_m2 == 0).any()
+        for name in ("indices", "points_world", "rho", "var_m2", "unexplored", "weak"):
+            x, y = getattr(a, name), getattr(b, name)
+            assert x.dtype == y.dtype and x.tobytes() == y.tobytes(), name

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from services.edge_server.rrt import rrt_frontier_mask
+from services.common.grid import GridSpec
+from services.edge_server.rrt import kept_points, rrt_frontier_mask
 
 
 def _corridor() -> tuple[np.ndarray, np.ndarray]:
@@ -46,15 +47,10 @@ def test_tree_nodes_now_blocked_are_dropped() -> None:
 
 
 def test_rrt_frontier_points_stay_until_their_cell_is_known() -> None:
-    from services.common.grid import GridSpec
-    from tests.test_edge_frontiers3d import open_room_planner
-
-    p = open_room_planner("rrt")
     spec = GridSpec(-1.0, -2.0, 0.1, 40, 40)  # x from -1, y from -2
-    origin_yx = np.array([spec.origin_y, spec.origin_x])
-    p._rrt_points_yx = np.array([[0.05, 0.05], [1.05, 1.05], [50.0, 50.0]])  # last: off grid
+    points_yx = np.array([[0.05, 0.05], [1.05, 1.05], [50.0, 50.0]])  # last: off grid
     known = np.zeros(spec.shape, bool)
-    kept = p._kept_rrt_points(known, spec, origin_yx)
+    kept = kept_points(points_yx, known, spec)
     assert kept.sum() == 2 and kept[20, 10] and kept[30, 20]
     known[20, 10] = True  # (y, x) = (0.05, 0.05) seen since
-    assert p._kept_rrt_points(known, spec, origin_yx).sum() == 1
+    assert kept_points(points_yx, known, spec).sum() == 1

@@ -5,7 +5,8 @@ registrations, GTSAM), and at L = 0 the lockstep clock waits for the whole plan 
 second core idles. `WorkerMerges` runs the update in a child process on a replica of the
 submap store, which gets every Submap message and every correction in the planner's order,
 so the update is the same function of the same inputs and returns the same poses. Meanwhile
-the planner brings P* and Alg. 1's sums up to date with the new data (planner.py, `_merge`).
+the planner brings P* and Alg. 1's sums up to date with the new data and surveys it
+(planner.py, `_merge_and_survey`), again after a correction.
 A thread cannot do this: small_gicp holds the GIL while it registers (docs/benchmarks.md).
 
 Both runners answer `finish` with the submaps whose pose changed and, for each robot with

@@ -14,7 +14,6 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy import ndimage
 
 from schemas.messages import (
     Correction,
@@ -26,7 +25,6 @@ from schemas.messages import (
     RobotPose,
     Submap,
 )
-from services.common.grid import GridSpec
 from services.edge_server.assignment import Scorer, make_scorer
 from services.edge_server.completion import CompletionJudge, VisitLog
 from services.edge_server.config import EdgeConfig
@@ -37,7 +35,6 @@ from services.edge_server.frontiers import (
     detect_frontiers,
     empty_frontiers,
     frontier_length_near,
-    frontier_set,
     frontiers_message,
     goal_transform,
 )
@@ -48,7 +45,7 @@ from services.edge_server.merged_grid import GridSnapshot, MergedGrid
 from services.edge_server.merged_map import MergedMap
 from services.edge_server.robot_fields import InflationCache, RobotFields
 from services.edge_server.robot_views import robot_grid
-from services.edge_server.rrt import rrt_frontier_mask
+from services.edge_server.rrt import RrtMemory, rrt_frontiers
 from services.edge_server.spatial_frontiers import (
     concat,
     detect_spatial_frontiers,
@@ -75,6 +72,17 @@ class PlanOutput:
     frontiers: Frontiers
     goals: list[Goal]
     corrections: list[Correction] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class Survey:
+    """What a plan reads of the merged data (`snap` None: no data yet, nothing else)."""
+
+    snap: GridSnapshot | None
+    fields: RobotFields | None = None  # each robot's reachable cells and distance fields
+    fs: FrontierSet | None = None  # the planner's frontier regions, with their goals
+    fell_back: bool = False  # no 3D region was usable: `fs` are the grid's frontiers
+    rrt: RrtMemory | None = None  # `rrt`: what its detector keeps, once the plan is made
 
 
 SPACE_PLANNERS = ("space", "space-paper")
@@ -109,8 +117,7 @@ class EdgePlanner:
                                          config.density_threshold, config.variance_threshold_m2,
                                          config.frontier_z_max_m)
         self._alg1_version = -1
-        self._rrt_tree_xy = np.zeros((0, 2))  # the RRT's nodes, world (y, x) metres
-        self._rrt_points_yx = np.zeros((0, 2))  # its frontier points not yet seen, likewise
+        self.rrt = RrtMemory()  # the RRT's tree and frontier points, between plans
         self._floor_regions = 0  # unseen floor patches in the last plan (logged on change)
         self.inflation = InflationCache()
         self.visits = VisitLog(config.weak_visit_range_m, math.radians(config.weak_visit_fov_deg))
@@ -181,22 +188,56 @@ class EdgePlanner:
         """One robot's own grid on the merged grid's current bounds (map/robot_grid)."""
         return robot_grid(self.store, self.merged, self.grid, robot_id, tick)
 
-    def _merge(self, tick: int) -> list[Correction]:
-        """Pose-graph update; corrected poses move the submaps and go back to the agents.
-        A runner in another process updates while P* and Alg. 1's sums take the new data at
-        the poses as they are: the corrections then move submaps as on any plan, so P* ends
-        the same (its versions aside)."""
+    def _merge_and_survey(self, tick: int, robots: list[int], robot_xy: np.ndarray,
+                          ) -> tuple[list[Correction], Survey]:
+        """Pose-graph update (corrected poses move the submaps and go back to the agents),
+        then the survey of the merged data. A runner in another process updates while this
+        one surveys the data at the poses as they are; most updates correct nothing, and that
+        survey stands. After a correction the grid's bounds go back to where they were and
+        the survey is made again: P*, the grid and Alg. 1's sums end as if made once."""
         if not self.config.merge:
-            return []
+            self.merged.update(self.store)
+            return [], self._survey(tick, robots, robot_xy)
         self.merges.start(self.store)
+        survey, bounds = None, self.grid.bounds
         if self.merges.concurrent:
             self.merged.update(self.store)
-            self._point_frontiers()
+            survey = self._survey(tick, robots, robot_xy)
         changed, estimates = self.merges.finish(self.store)
         for key in sorted(changed):
             self.store.set_pose(key, changed[key])
+        if changed or survey is None:
+            self.grid.bounds = bounds  # the bounds only grow: not from the poses before
+            self.merged.update(self.store)
+            survey = self._survey(tick, robots, robot_xy)
         return [Correction(robot_id=robot, tick=tick, submap_ids=np.array(ids, np.int32),
-                           T_world_submap=poses) for robot, (ids, poses) in estimates.items()]
+                           T_world_submap=poses) for robot, (ids, poses) in estimates.items()
+                ], survey
+
+    def _survey(self, tick: int, robots: list[int], robot_xy: np.ndarray) -> Survey:
+        """The merged grid, each robot's reachable cells and the planner's frontier regions:
+        what the plan reads of the merged data, changing nothing but caches and the grid's
+        bounds (so it may be made again after a correction)."""
+        # Robots widen the grid only once there is data (no grid at all before that).
+        snap = self.grid.update(self.store, self.merged, robot_xy if self.store.submaps else None)
+        if snap is None:
+            return Survey(None)
+        spec = snap.spec
+        radius_cells = math.ceil(self.config.robot_radius_m / spec.resolution_m - 1e-9)
+        traversable = snap.free & ~self.inflation(snap.occupied, radius_cells)
+        starts = dict(zip(robots, spec.cell_of(robot_xy), strict=True))
+        fields = RobotFields(traversable, starts, self.config.start_snap_m / spec.resolution_m,
+                             int(self.config.start_island_m2 / spec.resolution_m**2))
+        reachable = fields.reachable
+        goal_edt = goal_transform(self.book.goal_cells(reachable, spec))
+        fs, rrt = self._frontiers(tick, snap, traversable, reachable, fields, robot_xy, goal_edt)
+        fell_back = self._fall_back_to_grid(fs, fields, tick)
+        if fell_back:
+            fallback = self.config.model_copy(
+                update={"frontier_min_cells": self.config.space_grid_fallback_min_cells})
+            fs = grid_as_unexplored(detect_frontiers(snap.free, snap.known, reachable, spec,
+                                                     fallback, goal_edt))
+        return Survey(snap, fields, fs, fell_back, rrt)
 
     def _point_frontiers(self) -> PointFrontiers | None:
         """Alg. 1 on P*, incrementally when P* is on the ϱ lattice (None: from scratch)."""
@@ -212,8 +253,9 @@ class EdgePlanner:
     def _frontiers(
         self, tick: int, snap: GridSnapshot, traversable: np.ndarray, reachable: np.ndarray,
         fields: RobotFields, robot_xy: np.ndarray, goal_edt: GoalTransform,
-    ) -> FrontierSet:
-        """Frontier regions of the configured planner, with goals among `reachable` cells."""
+    ) -> tuple[FrontierSet, RrtMemory | None]:
+        """Frontier regions of the configured planner, with goals among `reachable` cells
+        (and, for `rrt`, what its detector keeps for the next plan)."""
         cfg, spec = self.config, snap.spec
         if cfg.planner in SPACE_PLANNERS:
             fs, _ = detect_spatial_frontiers(self.merged, snap.known, reachable, spec, cfg,
@@ -233,25 +275,12 @@ class EdgePlanner:
                                                     cfg.space_view_min_frontier_cells),
                                        fs.goal_rc, spec, cfg.space_view_range_m)
                     if cfg.space_view_gain_per_m2 > 0 and cfg.planner == "space" else None)
-            return replace(fs, importance=imp, grid_frontier_m=border, unknown_view_m2=seen)
+            return replace(fs, importance=imp, grid_frontier_m=border, unknown_view_m2=seen), None
         if cfg.planner == "rrt":
             starts = [fields.starts[r] for r in sorted(fields.starts)]
-            rng = np.random.default_rng([cfg.seed, tick])
-            origin_yx = np.array([spec.origin_y, spec.origin_x])
-            tree_rc = None
-            if cfg.rrt_keep_tree and len(self._rrt_tree_xy):
-                tree_rc = (self._rrt_tree_xy - origin_yx) / spec.resolution_m - 0.5
-            mask, tree = rrt_frontier_mask(traversable, snap.known, starts, cfg.rrt_iterations,
-                                           cfg.rrt_step_m / spec.resolution_m, rng, tree_rc)
-            # kept in world (y, x): the grid's origin moves as the map grows
-            self._rrt_tree_xy = (tree + 0.5) * spec.resolution_m + origin_yx
-            if cfg.rrt_keep_tree:  # rrt_exploration's filter: points stay until seen
-                mask |= self._kept_rrt_points(snap.known, spec, origin_yx)
-                self._rrt_points_yx = (np.argwhere(mask) + 0.5) * spec.resolution_m + origin_yx
-            link = int(round(cfg.frontier_link_m / spec.resolution_m))
-            mask = ndimage.binary_dilation(mask, np.ones((2 * link + 1,) * 2, bool)) & ~snap.known
-            return frontier_set(mask, reachable, spec, 1, cfg.goal_max_offset_m, goal_edt)
-        return detect_frontiers(snap.free, snap.known, reachable, spec, cfg, goal_edt)
+            return rrt_frontiers(traversable, snap.known, starts, reachable, spec, cfg,
+                                 np.random.default_rng([cfg.seed, tick]), self.rrt, goal_edt)
+        return detect_frontiers(snap.free, snap.known, reachable, spec, cfg, goal_edt), None
 
     def _unexplored_voxels(self, fs: FrontierSet, reachable: np.ndarray, tick: int) -> int:
         """The assignable F_u regions' voxels, together."""
@@ -340,50 +369,26 @@ class EdgePlanner:
         usable = self.book.allowed(fs, tick) & fields.reachable[goal_rc[:, 0], goal_rc[:, 1]]
         return not usable.any()
 
-    def _kept_rrt_points(self, known: np.ndarray, spec: GridSpec,
-                         origin_yx: np.ndarray) -> np.ndarray:
-        """(H, W) bool: frontier points of earlier plans whose cell is still unknown."""
-        mask = np.zeros(known.shape, bool)
-        rc = np.floor((self._rrt_points_yx - origin_yx) / spec.resolution_m).astype(np.int64)
-        rc = rc[spec.contains(rc)]
-        mask[rc[:, 0], rc[:, 1]] = True
-        return mask & ~known
-
     def plan(self, tick: int) -> PlanOutput:
-        corrections = self._merge(tick)
-        self.merged.update(self.store)
         robots = self.active_robots()
         robot_xy = np.array([[self.poses[r].x, self.poses[r].y] for r in robots]).reshape(-1, 2)
         self._record_views(robots)
         edge_ticks, self.skipped_edge_ticks = 1 + self.skipped_edge_ticks, 0
-        # Robots widen the grid only once there is data (no grid at all before that).
-        extra_xy = robot_xy if self.store.submaps else None
-        snap = self.grid.update(self.store, self.merged, extra_xy)
-        self.last_grid = snap
+        corrections, survey = self._merge_and_survey(tick, robots, robot_xy)
+        snap = self.last_grid = survey.snap
+        if survey.rrt is not None:
+            self.rrt = survey.rrt
         if snap is None:
             complete = self.judge.update(tick, 0, 0, edge_ticks=edge_ticks)
             return PlanOutput(None, frontiers_message(tick, empty_frontiers((0, 0)), complete, {},
                                                       self.config.grid_resolution_m), [],
                               corrections)
-        spec = snap.spec
-        radius_cells = math.ceil(self.config.robot_radius_m / spec.resolution_m - 1e-9)
-        traversable = snap.free & ~self.inflation(snap.occupied, radius_cells)
-        starts = dict(zip(robots, spec.cell_of(robot_xy), strict=True))
-        fields = RobotFields(traversable, starts, self.config.start_snap_m / spec.resolution_m,
-                             int(self.config.start_island_m2 / spec.resolution_m**2))
-        reachable = fields.reachable
-        goal_edt = goal_transform(self.book.goal_cells(reachable, spec))
-        fs = self._frontiers(tick, snap, traversable, reachable, fields, robot_xy, goal_edt)
-        fell_back = self._fall_back_to_grid(fs, fields, tick)
-        if fell_back:
-            fallback = self.config.model_copy(
-                update={"frontier_min_cells": self.config.space_grid_fallback_min_cells})
-            fs = grid_as_unexplored(detect_frontiers(snap.free, snap.known, reachable, spec,
-                                                     fallback, goal_edt))
+        assert survey.fields is not None and survey.fs is not None
+        spec, fs, reachable = snap.spec, survey.fs, survey.fields.reachable
         poses = np.array([[self.poses[r].x, self.poses[r].y, self.poses[r].yaw] for r in robots])
-        result = self.book.plan(tick, robots, fields, fs, spec,
+        result = self.book.plan(tick, robots, survey.fields, fs, spec,
                                 self._scorer_for(fs, reachable, tick), poses)
-        fraction = (None if fell_back or self.config.planner != "space"  # the paper's: as written
+        fraction = (None if survey.fell_back or self.config.planner != "space"  # as written
                     else result.unexplored_voxels / max(len(self.merged), 1))
         log.debug("plan tick %d: unexplored fraction %s", tick, fraction)
         complete = self.judge.update(tick, result.assignable, int(snap.known.sum()), fraction,

@@ -13,7 +13,24 @@ tick), so a lockstep mission repeats exactly. The frontier points become the mas
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
+from scipy import ndimage
+
+from services.common.grid import GridSpec
+from services.edge_server.config import EdgeConfig
+from services.edge_server.frontiers import FrontierSet, GoalTransform, frontier_set
+
+
+@dataclass(frozen=True)
+class RrtMemory:
+    """What the detector keeps from one plan to the next, in world (y, x) metres: the grid's
+    origin moves as the map grows."""
+
+    tree_yx: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (N, 2) nodes
+    points_yx: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (M, 2) frontier
+    # points not yet seen (rrt_exploration's filter keeps them until their cell is known)
 
 
 def _walk(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -62,3 +79,36 @@ def rrt_frontier_mask(
             nodes[count] = new
             count += 1
     return mask, nodes[len(starts_rc):count]
+
+
+def kept_points(points_yx: np.ndarray, known: np.ndarray, spec: GridSpec) -> np.ndarray:
+    """(H, W) bool: frontier points of earlier plans whose cell is still unknown."""
+    mask = np.zeros(known.shape, bool)
+    origin_yx = np.array([spec.origin_y, spec.origin_x])
+    rc = np.floor((points_yx - origin_yx) / spec.resolution_m).astype(np.int64)
+    rc = rc[spec.contains(rc)]
+    mask[rc[:, 0], rc[:, 1]] = True
+    return mask & ~known
+
+
+def rrt_frontiers(
+    traversable: np.ndarray, known: np.ndarray, starts_rc: list[tuple[int, int]],
+    goal_ok: np.ndarray, spec: GridSpec, config: EdgeConfig, rng: np.random.Generator,
+    memory: RrtMemory, goal_edt: GoalTransform | None = None,
+) -> tuple[FrontierSet, RrtMemory]:
+    """(frontier clusters with goals among `goal_ok` cells, what to keep for the next plan)
+    on the grid `spec`; without `rrt_keep_tree` a fresh tree each plan and no points kept."""
+    origin_yx = np.array([spec.origin_y, spec.origin_x])
+    keep = config.rrt_keep_tree
+    tree_rc = None
+    if keep and len(memory.tree_yx):
+        tree_rc = (memory.tree_yx - origin_yx) / spec.resolution_m - 0.5
+    mask, tree = rrt_frontier_mask(traversable, known, starts_rc, config.rrt_iterations,
+                                   config.rrt_step_m / spec.resolution_m, rng, tree_rc)
+    if keep:
+        mask |= kept_points(memory.points_yx, known, spec)
+    points_yx = (np.argwhere(mask) + 0.5) * spec.resolution_m + origin_yx
+    link = int(round(config.frontier_link_m / spec.resolution_m))
+    mask = ndimage.binary_dilation(mask, np.ones((2 * link + 1,) * 2, bool)) & ~known
+    return (frontier_set(mask, goal_ok, spec, 1, config.goal_max_offset_m, goal_edt),
+            RrtMemory((tree + 0.5) * spec.resolution_m + origin_yx, points_yx))
