@@ -11,6 +11,10 @@ alone. The edge is taken as alive throughout (true for a normal mission).
         --robots 3 --sim-time 300 --seed 0 --sample-every 0
     # replay robot 0, per-stage medians, outputs checked against the mission's:
     .venv/bin/python bench/bench_agent_replay.py replay /tmp/agent_rec --robot 0 --check
+    # the same with each tick's teammate poses and edge messages in another arrival order
+    # (a random interleaving of their senders): outputs that differ depend on arrival order
+    .venv/bin/python bench/bench_agent_replay.py replay /tmp/agent_rec --robot 0 --check \
+        --shuffle 1
     # the same under cProfile (top functions by cumulative and own time):
     .venv/bin/python bench/bench_agent_replay.py replay /tmp/agent_rec --robot 0 --profile
 """
@@ -21,6 +25,7 @@ import argparse
 import cProfile
 import os
 import pstats
+import random
 import struct
 import subprocess
 import sys
@@ -166,11 +171,34 @@ def robot_inputs(keys: Keys, robot: int, path: Path) -> Iterator[tuple[str, str,
             yield kind, key, payload
 
 
+def interleave(messages: list[Message], sender: Callable[[Message], object],
+               rng: random.Random | None) -> list[Message]:
+    """`messages` in a random interleaving of their senders, each sender's own order kept:
+    an arrival order the bus could have given (None: as they are)."""
+    if rng is None:
+        return messages
+    queues: dict[object, list[Message]] = {}
+    for msg in messages:
+        queues.setdefault(sender(msg), []).append(msg)
+    lanes = [q[::-1] for q in queues.values()]
+    out: list[Message] = []
+    while lanes:
+        lane = rng.choice(lanes)
+        out.append(lane.pop())
+        lanes = [q for q in lanes if q]
+    return out
+
+
+def _agent_sender(msg: Message) -> object:
+    return msg.robot_id if isinstance(msg, RobotPose) else "edge"
+
+
 def replay(rec: Path, robot: int, limit: int | None, overrides: dict[str, str] | None = None,
-           ) -> tuple[StageTimer, dict, list[str]]:
+           shuffle: int | None = None) -> tuple[StageTimer, dict, list[str]]:
     """(timer, mismatches per output topic, outputs as published) of one robot's replay;
     `overrides` (dotted config keys) change the agent from the recorded mission's, so its
-    outputs differ and the inputs, being the mission's, are open loop."""
+    outputs differ and the inputs, being the mission's, are open loop; `shuffle` (a seed)
+    applies each tick's due messages in a random interleaving of their senders."""
     config = load_config(rec / "run" / "config.yaml", overrides or {})
     keys = Keys(config.bus.prefix)
     core = AgentCore(config.agent, robot, config.sim.tick_s, team_size=config.sim.robots - 1)
@@ -180,6 +208,7 @@ def replay(rec: Path, robot: int, limit: int | None, overrides: dict[str, str] |
     expected: dict[str, list[bytes]] = {t: [] for t in OUTPUTS}
     produced: dict[str, list[bytes]] = {t: [] for t in OUTPUTS}
     pending: list[Message] = []
+    rng = None if shuffle is None else random.Random(shuffle)
     n_odom = 0
     for kind, _key, payload in robot_inputs(keys, robot, rec / LOG):
         if kind.startswith("out:"):
@@ -195,7 +224,7 @@ def replay(rec: Path, robot: int, limit: int | None, overrides: dict[str, str] |
         elif isinstance(msg, RgbdFrame):
             core.on_rgbd(msg)
         elif isinstance(msg, Odometry):
-            _tick(core, msg, pending, timer, produced)
+            _tick(core, msg, pending, timer, produced, rng)
             n_odom += 1
             if limit is not None and n_odom >= limit:
                 break
@@ -206,9 +235,10 @@ def replay(rec: Path, robot: int, limit: int | None, overrides: dict[str, str] |
 
 
 def _tick(core: AgentCore, odom: Odometry, pending: list[Message], timer: StageTimer,
-          produced: dict[str, list[bytes]]) -> None:
+          produced: dict[str, list[bytes]], rng: random.Random | None) -> None:
     t0 = time.process_time()
-    due = [m for m in pending if m.tick < odom.tick]  # type: ignore[attr-defined]
+    due = interleave([m for m in pending if m.tick < odom.tick],  # type: ignore[attr-defined]
+                     _agent_sender, rng)
     pending[:] = [m for m in pending if m.tick >= odom.tick]  # type: ignore[attr-defined]
     for earlier in due:
         _apply(core, earlier)
@@ -271,6 +301,9 @@ def main() -> None:
     p.add_argument("--ticks", type=int, default=None, help="stop after this many ticks")
     p.add_argument("--check", action="store_true", help="compare outputs with the mission's")
     p.add_argument("--profile", action="store_true", help="cProfile the replay")
+    p.add_argument("--shuffle", type=int, default=None, metavar="SEED",
+                   help="apply each tick's teammate poses and edge messages in a random "
+                   "interleaving of their senders (with --check: does arrival order matter?)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="config override (repeatable), e.g. agent.reg_whole_voxels=pixels: the "
                    "stage costs of another setting on the same inputs (open loop)")
@@ -282,7 +315,8 @@ def main() -> None:
     if prof is not None:
         prof.enable()
     overrides = dict(kv.split("=", 1) for kv in args.set)
-    timer, mismatches, counts = replay(args.rec, args.robot, args.ticks, overrides)
+    timer, mismatches, counts = replay(args.rec, args.robot, args.ticks, overrides,
+                                       args.shuffle)
     if prof is not None:
         prof.disable()
         stats = pstats.Stats(prof).strip_dirs()

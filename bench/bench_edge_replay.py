@@ -11,6 +11,8 @@ the results alone. Every agent is taken as alive throughout (true for a normal m
         --robots 3 --sim-time 300 --seed 0 --sample-every 0
     .venv/bin/python bench/bench_edge_replay.py /tmp/agent_rec --check
     .venv/bin/python bench/bench_edge_replay.py /tmp/agent_rec --profile
+    # each plan's inputs in another arrival order (a random interleaving of the robots):
+    .venv/bin/python bench/bench_edge_replay.py /tmp/agent_rec --check --shuffle 1
 
 It also prints why goals were not kept from one plan to the next (`GoalBook.drops`).
 """
@@ -21,6 +23,7 @@ import argparse
 import cProfile
 import os
 import pstats
+import random
 import statistics
 import sys
 import time
@@ -31,7 +34,7 @@ from typing import Any
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_agent_replay import LOG, StageTimer, read_log  # noqa: E402
+from bench_agent_replay import LOG, StageTimer, interleave, read_log  # noqa: E402
 
 from schemas import encode  # noqa: E402
 from schemas.codec import decode  # noqa: E402
@@ -91,10 +94,11 @@ def instrument(planner: EdgePlanner, timer: StageTimer) -> list[float]:
 
 def replay(rec: Path, limit: int | None, overrides: dict[str, str] | None = None,
            prof: cProfile.Profile | None = None, profile_after: int = 0,
-           ) -> tuple[StageTimer, list[float], dict, EdgePlanner]:
+           shuffle: int | None = None) -> tuple[StageTimer, list[float], dict, EdgePlanner]:
     """(timer, CPU s per plan, mismatches per output, the planner) of the whole recording;
     `overrides` (dotted keys) change the mission's config (then --check fails by design).
-    `prof` runs from plan `profile_after` on (a large mission's late plans cost the most)."""
+    `prof` runs from plan `profile_after` on (a large mission's late plans cost the most);
+    `shuffle` (a seed) feeds each plan's inputs in a random interleaving of the robots."""
     config = load_config(rec / "run" / "config.yaml", overrides or {})
     keys = Keys(config.bus.prefix)
     planner = EdgePlanner(config.edge, config.sim.tick_s, merges_for(config.edge))
@@ -115,13 +119,17 @@ def replay(rec: Path, limit: int | None, overrides: dict[str, str] | None = None
     plan_s: list[float] = []
     wall_s: list[float] = []
     fed = 0
+    rng = None if shuffle is None else random.Random(shuffle)
     ordered = sorted(range(len(inbox)), key=lambda i: inbox[i].tick)  # type: ignore[attr-defined]
     for k in range(0, last + 1, every):
         if prof is not None and len(plan_s) == profile_after:
             prof.enable()
+        batch = []
         while fed < len(ordered) and inbox[ordered[fed]].tick < k:  # type: ignore[attr-defined]
-            _feed(planner, inbox[ordered[fed]])
+            batch.append(inbox[ordered[fed]])
             fed += 1
+        for msg in interleave(batch, lambda m: m.robot_id, rng):  # type: ignore[attr-defined]
+            _feed(planner, msg)
         if not planner.plan_due(k // every):  # edge.plan_every_edge_ticks, as node.py
             planner.skip()
             continue
@@ -188,6 +196,9 @@ def main() -> None:
     parser.add_argument("--limit", type=int, default=None, help="stop after this many plans")
     parser.add_argument("--profile-after", type=int, default=0, metavar="N",
                         help="with --profile: profile from plan N on")
+    parser.add_argument("--shuffle", type=int, default=None, metavar="SEED",
+                        help="feed each plan's inputs in a random interleaving of the robots "
+                        "(with --check: does arrival order matter?)")
     parser.add_argument("--return-freed", action="store_true",
                         help="leave glibc's default of unmapping large freed arrays (the edge "
                         "keeps them: services/common/heap.py)")
@@ -199,7 +210,7 @@ def main() -> None:
     prof = cProfile.Profile() if args.profile else None
     timer, plan_s, mismatches, planner = replay(args.recording, args.limit,
                                                 dict(s.split("=", 1) for s in args.set),
-                                                prof, args.profile_after)
+                                                prof, args.profile_after, args.shuffle)
     if prof is not None:
         prof.disable()
         pstats.Stats(prof).sort_stats("cumulative").print_stats(30)

@@ -164,8 +164,9 @@ def test_spacemap_run_writes_a_run_folder_and_repeats_exactly(
 def test_pipelined_edge_repeats_exactly(tmp_path: Path) -> None:
     """sim.edge_pipeline_ticks = 9 (the edge's outputs of tick k apply at k + L + 1, the plan
     runs while the fleet goes on) repeats exactly too; the default, L = 0, is the run-folder
-    test's above."""
-    args = ("--robots", "2", "--sim-time", "12", "--seed", "2", "--sample-every", "0",
+    test's above. Four robots: each agent hears three teammates, whose poses arrive in
+    whatever order the bus gives (bench_agent_replay.py --shuffle checks that offline)."""
+    args = ("--robots", "4", "--sim-time", "12", "--seed", "2", "--sample-every", "0",
             "--set", "sim.edge_pipeline_ticks=9")
     first = _spacemap_run(tmp_path / "first", *args)
     assert yaml.safe_load((tmp_path / "first" / "config.yaml").read_text()
@@ -174,7 +175,7 @@ def test_pipelined_edge_repeats_exactly(tmp_path: Path) -> None:
     again = _spacemap_run(tmp_path / "again", *args)
     first.pop("wall_time_s"), again.pop("wall_time_s")
     assert again == first
-    for robot in range(2):
+    for robot in range(4):
         name = f"trajectory_{robot}_gt.tum"
         assert (tmp_path / "first" / name).read_text() == (tmp_path / "again" / name).read_text()
 
