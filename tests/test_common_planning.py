@@ -84,6 +84,10 @@ def test_distance_fields_equal_a_graph_built_edge_by_edge() -> None:
         reference = _reference_fields(grid, starts)
         assert np.array_equal(distance_fields(grid, starts), reference)
         assert np.array_equal(compiled_distance_fields(grid, starts), reference)
+        # one thread or several: each start's field is its own
+        assert np.array_equal(compiled_distance_fields(grid, starts, threads=1), reference)
+        with_outside = compiled_distance_fields(grid, [(-1, 0), *starts], threads=3)
+        assert np.isinf(with_outside[0]).all() and np.array_equal(with_outside[1:], reference)
 
 
 def test_distance_fields_equal_scipys_dijkstra_on_large_grids() -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import heapq
 import logging
 import math
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from scipy import ndimage
@@ -88,6 +89,9 @@ def _graph(traversable: np.ndarray) -> csr_matrix:
 # CPU-s, once per process): the warehouse's windows (200k cells, 9 starts a call), not the
 # rooms' (a house window is 50-100k cells with 3-6 starts, a few ms a start with scipy)
 COMPILED_MIN_WORK = 1_000_000
+# The edge's goal assignment needs several robots' fields at once, after the merger's worker
+# is done and while the lockstep clock waits for the plan: the second core is idle then.
+FIELD_THREADS = 2
 
 
 def distance_fields(traversable: np.ndarray, starts_rc: list[tuple[int, int]]) -> np.ndarray:
@@ -103,20 +107,31 @@ def distance_fields(traversable: np.ndarray, starts_rc: list[tuple[int, int]]) -
 
 
 def compiled_distance_fields(traversable: np.ndarray, starts_rc: list[tuple[int, int]],
-                             ) -> np.ndarray:
-    """`distance_fields` by a compiled bucket-queue Dijkstra (`grid_search`)."""
+                             threads: int = FIELD_THREADS) -> np.ndarray:
+    """`distance_fields` by a compiled bucket-queue Dijkstra (`grid_search`), the starts
+    shared among up to `threads` threads (the search releases the GIL; each field is its
+    own, so the result does not depend on the threads)."""
     from services.common.grid_search import field_into  # numba: only where fields are large
 
     traversable = np.asarray(traversable, dtype=bool)
     H, W = traversable.shape
     out = np.full((len(starts_rc), H, W), np.inf)
     free = np.pad(traversable, 1).reshape(-1)  # a blocked border: no bounds checks
-    dist = np.empty((H + 2) * (W + 2))
-    for k, (r, c) in enumerate(starts_rc):
-        if 0 <= r < H and 0 <= c < W and traversable[r, c]:
-            dist.fill(np.inf)
-            field_into(free, W + 2, (int(r) + 1) * (W + 2) + int(c) + 1, dist)
-            out[k] = dist.reshape(H + 2, W + 2)[1:-1, 1:-1]
+    valid = [k for k, (r, c) in enumerate(starts_rc)
+             if 0 <= r < H and 0 <= c < W and traversable[r, c]]
+
+    def fill(k: int) -> None:
+        r, c = starts_rc[k]
+        dist = np.full((H + 2) * (W + 2), np.inf)
+        field_into(free, W + 2, (int(r) + 1) * (W + 2) + int(c) + 1, dist)
+        out[k] = dist.reshape(H + 2, W + 2)[1:-1, 1:-1]
+
+    if threads > 1 and len(valid) > 1:
+        with ThreadPoolExecutor(min(threads, len(valid))) as pool:
+            list(pool.map(fill, valid))
+    else:
+        for k in valid:
+            fill(k)
     return out
 
 
