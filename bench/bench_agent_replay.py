@@ -107,19 +107,21 @@ def read_log(path: Path) -> Iterator[tuple[str, bytes]]:
 # -- replay ---------------------------------------------------------------------------------
 class StageTimer:
     """CPU seconds of wrapped callables, summed per stage within one tick (process time: on a
-    shared machine wall time measures the neighbours too)."""
+    shared machine wall time measures the neighbours too); `clock=time.perf_counter` for wall
+    seconds (a stage that waits, or runs on several threads)."""
 
-    def __init__(self) -> None:
+    def __init__(self, clock: Callable[[], float] = time.process_time) -> None:
+        self.clock = clock
         self.tick: dict[str, float] = {}
         self.ticks: list[dict[str, float]] = []
 
     def wrap(self, name: str, fn: Callable) -> Callable:
         def timed(*args, **kwargs):
-            t0 = time.process_time()
+            t0 = self.clock()
             try:
                 return fn(*args, **kwargs)
             finally:
-                self.tick[name] = self.tick.get(name, 0.0) + time.process_time() - t0
+                self.tick[name] = self.tick.get(name, 0.0) + self.clock() - t0
         return timed
 
     def add(self, name: str, seconds: float) -> None:

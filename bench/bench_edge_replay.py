@@ -94,17 +94,19 @@ def instrument(planner: EdgePlanner, timer: StageTimer) -> list[float]:
 
 def replay(rec: Path, limit: int | None, overrides: dict[str, str] | None = None,
            prof: cProfile.Profile | None = None, profile_after: int = 0,
-           shuffle: int | None = None) -> tuple[StageTimer, list[float], dict, EdgePlanner]:
+           shuffle: int | None = None, wall_stages: bool = False,
+           ) -> tuple[StageTimer, list[float], dict, EdgePlanner]:
     """(timer, CPU s per plan, mismatches per output, the planner) of the whole recording;
     `overrides` (dotted keys) change the mission's config (then --check fails by design).
     `prof` runs from plan `profile_after` on (a large mission's late plans cost the most);
-    `shuffle` (a seed) feeds each plan's inputs in a random interleaving of the robots."""
+    `shuffle` (a seed) feeds each plan's inputs in a random interleaving of the robots;
+    `wall_stages` times the stages in wall seconds instead of CPU seconds."""
     config = load_config(rec / "run" / "config.yaml", overrides or {})
     keys = Keys(config.bus.prefix)
     planner = EdgePlanner(config.edge, config.sim.tick_s, merges_for(config.edge))
     for robot in range(config.sim.robots):
         planner.on_agent(robot, True)
-    timer = StageTimer()
+    timer = StageTimer(time.perf_counter if wall_stages else time.process_time)
     waits = instrument(planner, timer)
     every = config.sim.edge_every_ticks
     inbox: list[Message] = []
@@ -199,6 +201,9 @@ def main() -> None:
     parser.add_argument("--shuffle", type=int, default=None, metavar="SEED",
                         help="feed each plan's inputs in a random interleaving of the robots "
                         "(with --check: does arrival order matter?)")
+    parser.add_argument("--wall-stages", action="store_true",
+                        help="the stage table in wall seconds (a stage on several threads, or "
+                        "waiting for the merger's worker), not CPU seconds")
     parser.add_argument("--return-freed", action="store_true",
                         help="leave glibc's default of unmapping large freed arrays (the edge "
                         "keeps them: services/common/heap.py)")
@@ -210,11 +215,14 @@ def main() -> None:
     prof = cProfile.Profile() if args.profile else None
     timer, plan_s, mismatches, planner = replay(args.recording, args.limit,
                                                 dict(s.split("=", 1) for s in args.set),
-                                                prof, args.profile_after, args.shuffle)
+                                                prof, args.profile_after, args.shuffle,
+                                                args.wall_stages)
     if prof is not None:
         prof.disable()
         pstats.Stats(prof).sort_stats("cumulative").print_stats(30)
         pstats.Stats(prof).sort_stats("tottime").print_stats(25)
+    if args.wall_stages:
+        print("stages below in wall seconds (their shares are of the plans' CPU seconds)")
     report(timer, plan_s)
     print("\ngoals not kept: " + (", ".join(f"{why} {n}" for why, n in
                                             planner.book.drops.most_common()) or "none"))
