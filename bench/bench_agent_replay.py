@@ -15,6 +15,10 @@ alone. The edge is taken as alive throughout (true for a normal mission).
     # (a random interleaving of their senders): outputs that differ depend on arrival order
     .venv/bin/python bench/bench_agent_replay.py replay /tmp/agent_rec --robot 0 --check \
         --shuffle 1
+    # the node's tick order at its most extreme: each tick's mapping left queued for as long
+    # as the ticks after it may run ahead of it (AgentCore._runs_ahead); outputs must not move
+    .venv/bin/python bench/bench_agent_replay.py replay /tmp/agent_rec --robot 0 --check \
+        --run-ahead
     # the same under cProfile (top functions by cumulative and own time):
     .venv/bin/python bench/bench_agent_replay.py replay /tmp/agent_rec --robot 0 --profile
 """
@@ -58,7 +62,7 @@ from services.robot_agent import agent as agent_mod  # noqa: E402
 from services.robot_agent import navigation as nav_mod  # noqa: E402
 from services.robot_agent.agent import AgentCore  # noqa: E402
 from services.robot_agent.local_grid import LocalGrid  # noqa: E402
-from services.robot_agent.node import TICKED, _apply  # noqa: E402
+from services.robot_agent.node import TICKED, _apply, defers  # noqa: E402
 
 _GRID_UPDATE = LocalGrid.update  # unwrapped, so instrumenting twice does not nest timers
 _NAV = {name: getattr(nav_mod, name) for name in ("plan_path", "astar", "path_blocked",
@@ -196,11 +200,14 @@ def _agent_sender(msg: Message) -> object:
 
 
 def replay(rec: Path, robot: int, limit: int | None, overrides: dict[str, str] | None = None,
-           shuffle: int | None = None) -> tuple[StageTimer, dict, list[str]]:
+           shuffle: int | None = None, run_ahead: bool = False,
+           ) -> tuple[StageTimer, dict, list[str]]:
     """(timer, mismatches per output topic, outputs as published) of one robot's replay;
     `overrides` (dotted config keys) change the agent from the recorded mission's, so its
     outputs differ and the inputs, being the mission's, are open loop; `shuffle` (a seed)
-    applies each tick's due messages in a random interleaving of their senders."""
+    applies each tick's due messages in a random interleaving of their senders;
+    `run_ahead` defers as the node does (`defers`) but never finishes a tick's mapping
+    until a later tick needs it done."""
     config = load_config(rec / "run" / "config.yaml", overrides or {})
     keys = Keys(config.bus.prefix)
     core = AgentCore(config.agent, robot, config.sim.tick_s, team_size=config.sim.robots - 1)
@@ -226,10 +233,13 @@ def replay(rec: Path, robot: int, limit: int | None, overrides: dict[str, str] |
         elif isinstance(msg, RgbdFrame):
             core.on_rgbd(msg)
         elif isinstance(msg, Odometry):
-            _tick(core, msg, pending, timer, produced, rng)
+            _tick(core, msg, pending, timer, produced, rng,
+                  config.sim.edge_every_ticks if run_ahead else None)
             n_odom += 1
             if limit is not None and n_odom >= limit:
                 break
+    for out in core.finish_tick():  # the node finishes when idle: after the last tick too
+        produced[out.topic].append(encode(out.message))
     mismatches = {t: _mismatch(expected[t], produced[t], limit is not None) for t in OUTPUTS}
     if mismatches["pose"].startswith("differ"):
         mismatches["pose"] += _pose_gap(expected["pose"], produced["pose"])
@@ -237,7 +247,8 @@ def replay(rec: Path, robot: int, limit: int | None, overrides: dict[str, str] |
 
 
 def _tick(core: AgentCore, odom: Odometry, pending: list[Message], timer: StageTimer,
-          produced: dict[str, list[bytes]], rng: random.Random | None) -> None:
+          produced: dict[str, list[bytes]], rng: random.Random | None,
+          run_ahead_every: int | None = None) -> None:
     t0 = time.process_time()
     due = interleave([m for m in pending if m.tick < odom.tick],  # type: ignore[attr-defined]
                      _agent_sender, rng)
@@ -245,9 +256,11 @@ def _tick(core: AgentCore, odom: Odometry, pending: list[Message], timer: StageT
     for earlier in due:
         _apply(core, earlier)
     camera = core.frame is not None and core.frame.tick <= odom.tick
-    outs = core.on_odometry(odom, defer=True)  # as the node: CmdVel first, then the rest
+    # as the node: CmdVel first, then the rest
+    ahead = run_ahead_every is not None
+    outs = core.on_odometry(odom, defer=defers(odom.tick, run_ahead_every) if ahead else True)
     t1 = time.process_time()
-    outs += core.finish_tick()
+    outs += core.finish_tick(until=(lambda: True) if ahead else None)
     t2 = time.process_time()
     for out in outs:
         produced[out.topic].append(encode(out.message))
@@ -306,6 +319,9 @@ def main() -> None:
     p.add_argument("--shuffle", type=int, default=None, metavar="SEED",
                    help="apply each tick's teammate poses and edge messages in a random "
                    "interleaving of their senders (with --check: does arrival order matter?)")
+    p.add_argument("--run-ahead", action="store_true",
+                   help="leave each tick's mapping queued until a later tick needs it (the "
+                   "node's order at its most extreme; with --check: outputs must not move)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="config override (repeatable), e.g. agent.reg_whole_voxels=pixels: the "
                    "stage costs of another setting on the same inputs (open loop)")
@@ -318,7 +334,7 @@ def main() -> None:
         prof.enable()
     overrides = dict(kv.split("=", 1) for kv in args.set)
     timer, mismatches, counts = replay(args.rec, args.robot, args.ticks, overrides,
-                                       args.shuffle)
+                                       args.shuffle, args.run_ahead)
     if prof is not None:
         prof.disable()
         stats = pstats.Stats(prof).strip_dirs()

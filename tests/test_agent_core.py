@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import random
 
 import numpy as np
 import pytest
@@ -284,8 +285,10 @@ def test_a_frame_whose_heading_is_unsure_maps_only_its_near_points() -> None:
 
 def _drive(core: AgentCore, ticks: int, mode: str) -> list[list[tuple[str, bytes]]]:
     """(topic, encoded message) per tick of a run with a goal and a correction; `mode`:
-    'inline', 'deferred' (on_odometry(defer=True), then finish_tick, as the node does) or
-    'unfinished' (defer=True, finish_tick never called)."""
+    'inline', 'deferred' (on_odometry(defer=True), then finish_tick), 'ahead' (finish_tick
+    stopped at random steps, as the node's is by its next input; a last entry holds what
+    finishing after the last tick sends) or 'unfinished' (finish_tick never called)."""
+    stop = random.Random(3)
     pose = (0.0, 0.0, 0.0)
     per_tick = []
     for k in range(ticks):
@@ -300,15 +303,34 @@ def _drive(core: AgentCore, ticks: int, mode: str) -> list[list[tuple[str, bytes
         outs = core.on_odometry(_odom(k, pose), defer=mode != "inline")
         cmd = outs[-1].message
         assert isinstance(cmd, CmdVel) and cmd.tick == k  # the command is out first
-        if mode == "deferred":
-            late = core.finish_tick()
+        if mode in ("deferred", "ahead"):
+            late = core.finish_tick(until=(lambda: stop.random() < 0.5) if mode == "ahead"
+                                    else None)
             assert all(o.topic == "submap" for o in late)
             outs = outs + late
         per_tick.append([(o.topic, encode(o.message)) for o in outs])
         x, y, yaw = pose
         pose = (x + cmd.v_mps * math.cos(yaw) * 0.1, y + cmd.v_mps * math.sin(yaw) * 0.1,
                 yaw + cmd.omega_radps * 0.1)
+    if mode == "ahead":
+        per_tick.append([(o.topic, encode(o.message)) for o in core.finish_tick()])
     return per_tick
+
+
+def test_odometry_ticks_run_ahead_of_unfinished_mapping_and_move_no_message() -> None:
+    """The node finishes a frame's mapping step by step until its next input waits; an
+    odometry-only tick then goes ahead of what is left (AgentCore._runs_ahead). Stopping
+    at random steps changes no message: each tick's command and pose are the inline run's,
+    and every topic's messages over the run come in the same order."""
+    ticks = 90
+    inline = _drive(AgentCore(AgentConfig(), 0, 0.1), ticks, "inline")
+    core = AgentCore(AgentConfig(), 0, 0.1)
+    ahead = _drive(core, ticks, "ahead")
+    assert core.ran_ahead >= 10 and not core.unfinished
+    for topic in ("cmd_vel", "pose"):
+        assert [_by_topic(t).get(topic) for t in ahead[:ticks]] == \
+            [_by_topic(t).get(topic) for t in inline]
+    assert _by_topic([m for t in ahead for m in t]) == _by_topic([m for t in inline for m in t])
 
 
 def _by_topic(messages: list[tuple[str, bytes]]) -> dict[str, list[bytes]]:

@@ -7,7 +7,7 @@ from schemas.messages import Goal, Message, Odometry, Pose2D, RobotPose
 from services.common.bus import Inbound
 from services.robot_agent.agent import AgentCore
 from services.robot_agent.config import AgentConfig
-from services.robot_agent.node import handle
+from services.robot_agent.node import finish, handle
 
 
 class FakeBus:
@@ -19,6 +19,9 @@ class FakeBus:
     def publish(self, key: str, message: Message) -> int:
         self.sent.append((key, message))
         return 0
+
+    def input_waiting(self) -> bool:
+        return False
 
 
 def test_handle_odometry_publishes_pose_then_cmd_vel_on_own_keys() -> None:
@@ -101,3 +104,29 @@ def test_late_submap_follows_cmd_vel_except_just_before_an_edge_tick() -> None:
     assert order[3][-2:] == ["cmd_vel", "submap"]  # deferred: tick 4 is no edge tick
     assert order[4][-1] == "cmd_vel" and "submap" in order[4]  # tick 5 is
     assert all(o.count("cmd_vel") == 1 for o in order.values())
+
+
+def test_an_odometry_tick_goes_ahead_of_mapping_its_input_cut_short() -> None:
+    """When Odometry(k + 1) is waiting, the node leaves the camera tick's mapping queued
+    (its command is out); the odometry-only tick answers before that mapping is done,
+    which is finished once no input waits, before the next frame."""
+    from tests.test_agent_core import _frame
+
+    bus, core, pending = FakeBus(), AgentCore(AgentConfig(), 0, 0.1), []
+    bus.input_waiting = lambda: True  # type: ignore[method-assign]
+
+    def odom(tick: int) -> Inbound:
+        return Inbound("spacemap/robot/0/odom", Odometry(
+            robot_id=0, tick=tick, stamp_ns=tick, v_mps=0.0, omega_radps=0.0,
+            pose_odom=Pose2D(x=0.0, y=0.0, yaw=0.0)))
+
+    for tick in range(2):
+        core.on_rgbd(_frame(tick, (0.0, 0.0, 0.0)))  # frames at ticks 0 and 1
+        handle(bus, core, odom(tick), 0.1, pending, 0, 5)  # type: ignore[arg-type]
+    assert core.unfinished and core.ran_ahead == 0  # tick 1's frame needed tick 0's map
+    handle(bus, core, odom(2), 0.1, pending, 0, 5)  # type: ignore[arg-type]
+    assert core.ran_ahead == 1 and core.unfinished  # no frame: tick 2 went ahead
+    bus.input_waiting = lambda: False  # type: ignore[method-assign]
+    finish(bus, core)
+    assert not core.unfinished and core.mapper.current is not None
+    assert len(core.mapper.current) > 0

@@ -62,3 +62,16 @@ def test_a_waking_item_wakes_the_reader_and_the_quiet_ones_before_it_come_first(
     reader.join(timeout=5.0)
     assert not reader.is_alive()  # woken long before its 30 s timeout
     assert got == ["pose", "odometry"]
+
+
+def test_woken_counts_the_waking_items_in_line_only() -> None:
+    box: Inbox[str] = Inbox()
+    assert not box.woken()
+    box.put("pose", wake=False)
+    assert not box.woken()  # a quiet item is no reason to stop work that can wait
+    box.put("odom")
+    box.put("goal")
+    assert box.woken()
+    assert box.get(timeout=0) == "pose" and box.woken()
+    assert box.get(timeout=0) == "odom" and box.woken()
+    assert box.get(timeout=0) == "goal" and not box.woken()

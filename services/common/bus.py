@@ -261,6 +261,10 @@ class Bus:
             self.reject(key, exc)
             return None
 
+    def input_waiting(self) -> bool:
+        """Whether an inbound item that wakes `poll` is in line (quiet ones do not count)."""
+        return self.inbox.woken()
+
     def drain(self) -> Iterator[Inbound | Presence]:
         """Every item already in the inbox, in order, without waiting."""
         while not self.inbox.empty():

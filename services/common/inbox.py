@@ -23,14 +23,21 @@ class Inbox(Generic[T]):
     """`queue.Queue`'s put / get / empty, where `put(item, wake=False)` notifies nobody."""
 
     def __init__(self) -> None:
-        self._items: deque[T] = deque()
+        self._items: deque[tuple[T, bool]] = deque()
         self._ready = threading.Condition(threading.Lock())
+        self._waking = 0  # items in line that woke (or would wake) the reader
 
     def put(self, item: T, wake: bool = True) -> None:
         with self._ready:
-            self._items.append(item)
+            self._items.append((item, wake))
             if wake:
+                self._waking += 1
                 self._ready.notify()
+
+    def woken(self) -> bool:
+        """Whether an item that wakes the reader is in line (a reader busy with work that
+        can wait asks this between its steps)."""
+        return self._waking > 0
 
     def get(self, timeout: float | None = None) -> T:
         """The oldest item; waits up to `timeout` s (None: forever) for one that wakes, and
@@ -42,7 +49,9 @@ class Inbox(Generic[T]):
                 if left is not None and left <= 0:
                     raise queue.Empty
                 self._ready.wait(left)
-            return self._items.popleft()
+            item, wake = self._items.popleft()
+            self._waking -= wake
+            return item
 
     def empty(self) -> bool:
         return not self._items

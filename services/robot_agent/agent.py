@@ -123,6 +123,7 @@ class AgentCore:
         self.deferred: list[Callable[[], None]] = []  # ... these
         # (tick, stamp_ns, T_world_loc, epoch) of the periodic delta that waits for them
         self.late: tuple[int, int, np.ndarray, int] | None = None
+        self.ran_ahead = 0  # ticks that went ahead of unfinished deferred work
 
     # -- inputs that only update state -------------------------------------------------------
     def on_rgbd(self, frame: RgbdFrame) -> None:
@@ -192,24 +193,50 @@ class AgentCore:
             self.T_world_loc = T_world_submap @ invert(self.mapper.pose_of(sid))
 
     # -- the tick ----------------------------------------------------------------------------
-    def finish_tick(self) -> list[Outgoing]:
-        """The deferred work of the last `on_odometry(defer=True)`, and its late messages
-        (the periodic Submap delta, if that tick took one)."""
-        work, self.deferred = self.deferred, []
-        for add_voxels in work:
-            add_voxels()
-        self.localizer.registrar.flush()
+    def finish_tick(self, until: Callable[[], bool] | None = None) -> list[Outgoing]:
+        """The deferred work of earlier `on_odometry(defer=True)` calls, in order, and its
+        late messages (the periodic Submap delta, if a tick took one). With `until`, it
+        stops between steps once `until()` is true (the node's next input is waiting): the
+        rest stays queued for a later call, or for the next `on_odometry`."""
+        registrar = self.localizer.registrar
+        while self.deferred:
+            if until is not None and until():
+                return []
+            self.deferred.pop(0)()
+        if registrar.pending:
+            if until is not None and until():
+                return []
+            registrar.flush()
         late, self.late = self.late, None
         delta = self.mapper.take_delta() if late is not None else None
         if late is None or delta is None:
             return []
         return [Outgoing("submap", self.outbox.submap(delta, *late))]
 
+    @property
+    def unfinished(self) -> bool:
+        """Deferred work (or its late delta) is still queued: `finish_tick` has something."""
+        return bool(self.deferred or self.late is not None or self.localizer.registrar.pending)
+
     def on_odometry(self, odom: Odometry, defer: bool = False) -> list[Outgoing]:
-        """Tick k's messages, CmdVel(k) last; with `defer`, call `finish_tick` next."""
-        early = self.finish_tick()  # a caller that did not: its late messages go out now
+        """Tick k's messages, CmdVel(k) last; with `defer`, call `finish_tick` next.
+
+        Deferred work still queued is done first (its late messages go out now), unless
+        this tick may run ahead of it (`_runs_ahead`): then it waits behind this tick's."""
+        ahead = defer and self.unfinished and self._runs_ahead(odom)
+        self.ran_ahead += ahead
+        early = [] if ahead else self.finish_tick()
         self.defer = self.localizer.registrar.defer_inserts = defer
         return early + self._tick(odom)
+
+    def _runs_ahead(self, odom: Odometry) -> bool:
+        """Whether tick k may come before the deferred work of earlier ticks: it has no
+        frame to register or integrate, resends nothing and no late delta waits, so it
+        neither reads the submap nor the registration map that work writes (a periodic
+        delta of its own becomes late, taken after that work). The command of an
+        odometry-only tick then goes out without waiting for the last frame's mapping."""
+        frame_due = self.frame is not None and self.frame.tick <= odom.tick
+        return not (frame_due or self.resend_pending or self.late is not None)
 
     def _tick(self, odom: Odometry) -> list[Outgoing]:
         if self.epoch is None:

@@ -91,14 +91,14 @@ def handle(
         outs = core.on_odometry(msg, defer=defers(msg.tick, edge_every_ticks))
         for out in outs:  # CmdVel(k) is last
             bus.publish(_out_key(bus, core.robot_id, out.topic), out.message)
-        for out in core.finish_tick():  # what CmdVel(k) did not need, while the sim steps on
-            bus.publish(_out_key(bus, core.robot_id, out.topic), out.message)
+        finish(bus, core)
         if msg.tick and msg.tick % REPORT_EVERY_TICKS == 0:
             sim_s = msg.tick * tick_s
             key = bus.keys.submap(core.robot_id)
             log.info("robot %d tick %d: submap traffic %.1f kB per sim second; "
-                     "registrations %s", core.robot_id, msg.tick,
-                     bus.bytes_out[key] / 1000.0 / sim_s, dict(core.localizer.outcomes))
+                     "registrations %s; %d ticks ran ahead of the last frame's mapping",
+                     core.robot_id, msg.tick, bus.bytes_out[key] / 1000.0 / sim_s,
+                     dict(core.localizer.outcomes), core.ran_ahead)
             if core.localizer.odometry is not None:
                 cal = core.localizer.odometry.calibration
                 log.info("robot %d tick %d: odometry errors %s from %d segments (%d left out, "
@@ -111,6 +111,15 @@ def handle(
                          "teammates'), %d fused, %d rejected, %d re-acquired", core.robot_id,
                          msg.tick, _degrees(walls.world_rad), _degrees(walls.own_rad),
                          len(walls.team), walls.n_fused, walls.n_rejected, walls.n_reacquired)
+
+
+def finish(bus: Bus, core: AgentCore) -> None:
+    """What the commands did not need, while the simulator steps on, step by step until an
+    input waits (Odometry(k + 1) first: an odometry-only tick runs ahead of the work,
+    AgentCore._runs_ahead); the rest waits for the next call."""
+    if core.unfinished:
+        for out in core.finish_tick(until=bus.input_waiting):
+            bus.publish(_out_key(bus, core.robot_id, out.topic), out.message)
 
 
 def _degrees(angle_rad: float | None) -> str:
@@ -148,10 +157,11 @@ def main(config: SpacemapConfig, robot_id: int) -> None:
         log.info("agent %d up on %s", robot_id, config.bus.connect)
         while not stop.is_set():
             item = bus.poll(timeout=POLL_S)
-            if item is not None:
-                with lock:
+            with lock:
+                if item is not None:
                     handle(bus, core, item, config.sim.tick_s, pending,
                            config.sim.edge_lag_ticks, config.sim.edge_every_ticks)
+                finish(bus, core)  # work an input cut short, now that none waits
                 if isinstance(item, Inbound) and isinstance(item.message, Odometry):
                     last_tick[0] = item.message.tick
     log.info("agent %d stopped", robot_id)
