@@ -12,7 +12,7 @@ import json
 import logging
 import queue
 import threading
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -60,6 +60,7 @@ class BusConfig(BaseModel):
     )
 
 
+CHANNEL_CAPACITY = 65536  # messages a `subscribe(channel=True)` queue holds before it blocks
 CONNECT_RETRY = {"period_init_ms": 50, "period_max_ms": 1000, "period_increase_factor": 2}
 
 
@@ -204,15 +205,32 @@ class Bus:
         self._liveliness: LivelinessWatch | None = None
         self._own_tokens: list[str] = []  # alive/** keys this session declared
         self._lock = threading.Lock()
+        # subscriptions read into `poll` from zenoh's own queues (`subscribe(channel=True)`)
+        self._channels: list[tuple[zenoh.Subscriber, type[Message],
+                                   Callable[[bytes], bool] | None]] = []
+        self._ready: deque[tuple[str, str, bytes | bool, type[Message] | None]] = deque()
+        self._entry_ready = False  # `_ready` ends with an entry taken from the inbox
 
     # -- inbound ---------------------------------------------------------------------------
     def subscribe(self, key_expr: str, model: type[Message],
-                  keep: Callable[[bytes], bool] | None = None, wake: bool = True) -> None:
+                  keep: Callable[[bytes], bool] | None = None, wake: bool = True,
+                  channel: bool = False) -> None:
         """Queue every message on `key_expr` for `poll` (decoded and validated there);
         `keep`, when given, sees each raw payload on the receive thread first and drops
         those it returns False for (a cheap sampler of heavy traffic, e.g. cameras).
         `wake=False`: the messages keep their place in the inbox without waking a waiting
-        `poll` (frequent ones the service only needs when something else arrives)."""
+        `poll` (frequent ones the service only needs when something else arrives).
+        `channel=True`: they wait in zenoh's own queue instead, which takes no Python on the
+        receive thread; `poll` reads them all just after it takes an item from the inbox
+        and returns them before it. So each comes before every item that arrived after it
+        (and before some that arrived just before it): enough for messages applied by their
+        stamp, not by their place in line."""
+        if channel:
+            sub = self.session.declare_subscriber(key_expr, zenoh.handlers.FifoChannel(
+                CHANNEL_CAPACITY))
+            self._handles.append(sub)
+            self._channels.append((sub, model, keep))
+            return
 
         def on_sample(sample: zenoh.Sample) -> None:
             payload = sample.payload.to_bytes()
@@ -247,10 +265,20 @@ class Bus:
 
     def poll(self, timeout: float | None = None) -> Inbound | Presence | None:
         """Next valid inbound item, or None when `timeout` passes with nothing valid."""
-        try:
-            tag, key, payload, model = self.inbox.get(timeout=timeout)
-        except queue.Empty:
-            return None
+        if not self._ready:
+            try:
+                entry = self.inbox.get(timeout=timeout)
+            except queue.Empty:
+                entry = None
+            self._read_channels()  # what came before `entry` (and a little after) first
+            if entry is not None:
+                self._ready.append(entry)
+                self._entry_ready = True
+            if not self._ready:
+                return None
+        tag, key, payload, model = self._ready.popleft()
+        if not self._ready:
+            self._entry_ready = False  # the inbox's entry is always the last one read
         if tag == "alive":
             role, ident = self.keys.alive_member(key)
             return Presence(role, ident, bool(payload))
@@ -261,13 +289,21 @@ class Bus:
             self.reject(key, exc)
             return None
 
+    def _read_channels(self) -> None:
+        for sub, model, keep in self._channels:
+            while (sample := sub.try_recv()) is not None:
+                payload = sample.payload.to_bytes()
+                if keep is None or keep(payload):
+                    self._ready.append(("msg", str(sample.key_expr), payload, model))
+
     def input_waiting(self) -> bool:
         """Whether an inbound item that wakes `poll` is in line (quiet ones do not count)."""
-        return self.inbox.woken()
+        return self._entry_ready or self.inbox.woken()
 
     def drain(self) -> Iterator[Inbound | Presence]:
         """Every item already in the inbox, in order, without waiting."""
-        while not self.inbox.empty():
+        self._read_channels()
+        while self._ready or not self.inbox.empty():
             item = self.poll(timeout=0)
             if item is not None:
                 yield item
@@ -322,6 +358,8 @@ class Bus:
         if self._liveliness is not None:
             self._liveliness.close()
             self._liveliness = None
+        self._read_channels()  # what zenoh's queues hold is counted below with the rest
+        self._channels.clear()
         for handle in reversed(self._handles):
             undeclare = getattr(handle, "undeclare", None)
             if undeclare is not None:

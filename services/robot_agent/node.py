@@ -36,7 +36,7 @@ def _subscribe(bus: Bus, robot_id: int) -> None:
     bus.subscribe(k.goal(robot_id), Goal)
     bus.subscribe(k.correction(robot_id), Correction)
     bus.subscribe(k.map_grid(), OccupancyGrid)
-    bus.subscribe(k.any_robot("pose"), RobotPose, wake=False)  # applied at the next odometry
+    bus.subscribe(k.any_robot("pose"), RobotPose, channel=True)  # applied at the next odometry
 
 
 def _out_key(bus: Bus, robot_id: int, topic: str) -> str:
